@@ -1,0 +1,221 @@
+//! The sparse convolution as a Burn backend extension, with its own backward in `Autodiff`.
+//!
+//! The trait's default bodies compose Burn primitives (select, matmul, select-assign per offset):
+//! that is what the GPU (`Cube`) runs. The CPU backends override all three methods with the slice
+//! kernels of [`crate::cpu`]. `Autodiff` registers a backward that calls the two gradient methods
+//! of the inner backend, never the differentiated composition.
+// burn-ndarray is deprecated in Burn 0.22 but is one of the CPU backends pmunet supports.
+#![allow(deprecated)]
+
+use std::sync::Arc;
+
+use burn::backend::autodiff::checkpoint::base::Checkpointer;
+use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
+use burn::backend::autodiff::grads::Gradients;
+use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
+use burn::backend::tensor::{FloatTensor, IndexingUpdateOp, IntTensor};
+use burn::backend::{Autodiff, Backend, Cube, Flex, NdArray, TensorMetadata, backend_extension};
+use burn::tensor::{DType, Shape, TensorData};
+
+use crate::cpu::{self, Element, WeightUse};
+use crate::kernel_map::KernelMap;
+
+/// A backend that can run the sparse convolution of a [`KernelMap`].
+///
+/// Shapes: features `[n_in, C_in]`, weight `[K, C_in, C_out]`, output `[n_out, C_out]`.
+#[backend_extension(NdArray, Flex, Cube, Autodiff)]
+pub trait SparseConvBackend: Backend {
+    /// `out[o] = Σ_k Σ_{(i, o) ∈ M_k} x[i] · W_k`.
+    fn sparse_conv(features: FloatTensor<Self>, weight: FloatTensor<Self>, map: Arc<KernelMap>) -> FloatTensor<Self> {
+        let (pairs, n_out) = (map.pairs(), map.n_out());
+        let c_out = weight.shape()[2];
+        let device = features.device();
+        let mut out = Self::float_zeros(Shape::new([n_out, c_out]), &device, features.dtype().into());
+        for k in 0..map.volume() {
+            let Some((input, output)) = offset_indices::<Self>(&map, k, &device) else { continue };
+            let w_k = weight_slice::<Self>(weight.clone(), k, &device);
+            let gathered = Self::float_select(features.clone(), 0, input);
+            let product = Self::float_matmul(gathered, w_k);
+            out = Self::float_select_assign(out, 0, output, product, IndexingUpdateOp::Add);
+        }
+        let _ = pairs;
+        out
+    }
+
+    /// The feature gradient: `dx[i] = Σ_k Σ_{(i, o) ∈ M_k} g[o] · W_kᵀ`.
+    fn sparse_conv_input_grad(grad_out: FloatTensor<Self>, weight: FloatTensor<Self>, map: Arc<KernelMap>) -> FloatTensor<Self> {
+        let c_in = weight.shape()[1];
+        let device = grad_out.device();
+        let mut grad = Self::float_zeros(Shape::new([map.n_in(), c_in]), &device, grad_out.dtype().into());
+        for k in 0..map.volume() {
+            let Some((input, output)) = offset_indices::<Self>(&map, k, &device) else { continue };
+            let w_k = Self::float_transpose(weight_slice::<Self>(weight.clone(), k, &device));
+            let gathered = Self::float_select(grad_out.clone(), 0, output);
+            let product = Self::float_matmul(gathered, w_k);
+            grad = Self::float_select_assign(grad, 0, input, product, IndexingUpdateOp::Add);
+        }
+        grad
+    }
+
+    /// The weight gradient: `dW_k = Σ_{(i, o) ∈ M_k} x[i]ᵀ · g[o]`, shape `[K, C_in, C_out]`.
+    fn sparse_conv_weight_grad(features: FloatTensor<Self>, grad_out: FloatTensor<Self>, map: Arc<KernelMap>) -> FloatTensor<Self> {
+        let c_in = features.shape()[1];
+        let c_out = grad_out.shape()[1];
+        let device = features.device();
+        let dtype = features.dtype().into();
+        let blocks = (0..map.volume())
+            .map(|k| match offset_indices::<Self>(&map, k, &device) {
+                None => Self::float_zeros(Shape::new([1, c_in, c_out]), &device, dtype),
+                Some((input, output)) => {
+                    let xs = Self::float_transpose(Self::float_select(features.clone(), 0, input));
+                    let gs = Self::float_select(grad_out.clone(), 0, output);
+                    Self::float_reshape(Self::float_matmul(xs, gs), Shape::new([1, c_in, c_out]))
+                }
+            })
+            .collect();
+        Self::float_cat(blocks, 0)
+    }
+}
+
+/// The input and output rows of offset `k` as index tensors, or `None` when it has no pairs.
+fn offset_indices<B: Backend>(map: &KernelMap, k: usize, device: &burn::backend::tensor::Device<B>) -> Option<(IntTensor<B>, IntTensor<B>)> {
+    let pairs = map.pairs();
+    let (s, e) = (pairs.start[k], pairs.start[k + 1]);
+    if s == e {
+        return None;
+    }
+    let to_tensor = |rows: &[u32]| {
+        let data: Vec<i32> = rows.iter().map(|&r| r as i32).collect();
+        B::int_from_data(TensorData::new(data, [e - s]), device)
+    };
+    Some((to_tensor(&pairs.input[s..e]), to_tensor(&pairs.output[s..e])))
+}
+
+/// `W_k` as a `[C_in, C_out]` matrix.
+fn weight_slice<B: Backend>(weight: FloatTensor<B>, k: usize, device: &burn::backend::tensor::Device<B>) -> FloatTensor<B> {
+    let shape = weight.shape();
+    let index = B::int_from_data(TensorData::new(vec![k as i32], [1]), device);
+    B::float_reshape(B::float_select(weight, 0, index), Shape::new([shape[1], shape[2]]))
+}
+
+/// Reads a CPU tensor's values, runs `f` on them as f32 or f64, and makes a tensor of the result.
+fn on_cpu<B: Backend>(
+    inputs: [FloatTensor<B>; 2],
+    out_shape: [usize; 2],
+    run_f32: impl FnOnce(&[f32], &[f32]) -> Vec<f32>,
+    run_f64: impl FnOnce(&[f64], &[f64]) -> Vec<f64>,
+) -> FloatTensor<B> {
+    let device = inputs[0].device();
+    let [a, b] = inputs.map(|t| burn::tensor::read_sync(B::float_into_data(t)).expect("reading a CPU tensor cannot fail"));
+    assert_eq!(a.dtype(), b.dtype(), "sparse conv inputs must share a dtype, got {:?} and {:?}", a.dtype(), b.dtype());
+    let data = match a.dtype() {
+        DType::F32 => TensorData::new(run_f32(slice::<f32>(&a), slice::<f32>(&b)), out_shape),
+        DType::F64 => TensorData::new(run_f64(slice::<f64>(&a), slice::<f64>(&b)), out_shape),
+        other => panic!("sparse conv runs on f32 and f64 tensors, got {other:?}"),
+    };
+    B::float_from_data(data, &device)
+}
+
+fn slice<T: Element + burn::backend::Element>(data: &TensorData) -> &[T] {
+    data.as_slice::<T>().expect("dtype checked above")
+}
+
+fn cpu_forward<B: Backend>(features: FloatTensor<B>, weight: FloatTensor<B>, map: &KernelMap) -> FloatTensor<B> {
+    let (c_in, c_out) = (weight.shape()[1], weight.shape()[2]);
+    check_shapes(&features.shape(), &weight.shape(), map.n_in(), map.volume());
+    on_cpu::<B>(
+        [features, weight],
+        [map.n_out(), c_out],
+        |x, w| cpu::gather_conv(x, c_in, w, c_out, WeightUse::Direct, map.out_table()),
+        |x, w| cpu::gather_conv(x, c_in, w, c_out, WeightUse::Direct, map.out_table()),
+    )
+}
+
+fn cpu_input_grad<B: Backend>(grad_out: FloatTensor<B>, weight: FloatTensor<B>, map: &KernelMap) -> FloatTensor<B> {
+    let (c_in, c_out) = (weight.shape()[1], weight.shape()[2]);
+    on_cpu::<B>(
+        [grad_out, weight],
+        [map.n_in(), c_in],
+        |g, w| cpu::gather_conv(g, c_out, w, c_in, WeightUse::Transposed, map.in_table()),
+        |g, w| cpu::gather_conv(g, c_out, w, c_in, WeightUse::Transposed, map.in_table()),
+    )
+}
+
+fn cpu_weight_grad<B: Backend>(features: FloatTensor<B>, grad_out: FloatTensor<B>, map: &KernelMap) -> FloatTensor<B> {
+    let (c_in, c_out) = (features.shape()[1], grad_out.shape()[1]);
+    let pairs = map.pairs();
+    let out = on_cpu::<B>(
+        [features, grad_out],
+        [map.volume(), c_in * c_out],
+        |x, g| cpu::weight_grad(x, c_in, g, c_out, pairs),
+        |x, g| cpu::weight_grad(x, c_in, g, c_out, pairs),
+    );
+    B::float_reshape(out, Shape::new([map.volume(), c_in, c_out]))
+}
+
+fn check_shapes(features: &Shape, weight: &Shape, n_in: usize, volume: usize) {
+    assert_eq!(features.num_dims(), 2, "sparse conv features must be [rows, channels], got {features:?}");
+    assert_eq!(weight.num_dims(), 3, "sparse conv weight must be [K, C_in, C_out], got {weight:?}");
+    assert_eq!(features[0], n_in, "features have {} rows but the kernel map expects {n_in}", features[0]);
+    assert_eq!(weight[0], volume, "weight has {} offsets but the kernel map has {volume}", weight[0]);
+    assert_eq!(features[1], weight[1], "features have {} channels, the weight expects {}", features[1], weight[1]);
+}
+
+macro_rules! cpu_backend {
+    ($backend:ty) => {
+        impl SparseConvBackend for $backend {
+            fn sparse_conv(features: FloatTensor<Self>, weight: FloatTensor<Self>, map: Arc<KernelMap>) -> FloatTensor<Self> {
+                cpu_forward::<Self>(features, weight, &map)
+            }
+            fn sparse_conv_input_grad(grad_out: FloatTensor<Self>, weight: FloatTensor<Self>, map: Arc<KernelMap>) -> FloatTensor<Self> {
+                cpu_input_grad::<Self>(grad_out, weight, &map)
+            }
+            fn sparse_conv_weight_grad(features: FloatTensor<Self>, grad_out: FloatTensor<Self>, map: Arc<KernelMap>) -> FloatTensor<Self> {
+                cpu_weight_grad::<Self>(features, grad_out, &map)
+            }
+        }
+    };
+}
+
+mod cpu_impls {
+    use super::*;
+    cpu_backend!(NdArray);
+    cpu_backend!(Flex);
+}
+
+impl SparseConvBackend for Cube {}
+
+#[derive(Debug)]
+struct SparseConvBackward;
+
+impl<B: SparseConvBackend> Backward<B, 2> for SparseConvBackward {
+    type State = (FloatTensor<B>, FloatTensor<B>, Arc<KernelMap>);
+
+    fn backward(self, ops: Ops<Self::State, 2>, grads: &mut Gradients, _checkpointer: &mut Checkpointer) {
+        let [node_features, node_weight] = ops.parents;
+        let grad = grads.consume::<B>(&ops.node);
+        let (features, weight, map) = ops.state;
+        if let Some(node) = node_weight {
+            grads.register::<B>(node.id, B::sparse_conv_weight_grad(features, grad.clone(), map.clone()));
+        }
+        if let Some(node) = node_features {
+            grads.register::<B>(node.id, B::sparse_conv_input_grad(grad, weight, map));
+        }
+    }
+}
+
+/// The gradient methods keep their default (composed, differentiable) bodies here, so a second
+/// derivative still works; the first backward never calls them on `Autodiff`.
+impl<B: SparseConvBackend, C: CheckpointStrategy> SparseConvBackend for Autodiff<B, C> {
+    fn sparse_conv(features: FloatTensor<Self>, weight: FloatTensor<Self>, map: Arc<KernelMap>) -> FloatTensor<Self> {
+        match SparseConvBackward.prepare::<C>([features.node(), weight.node()]).compute_bound().stateful() {
+            OpsKind::Tracked(prep) => {
+                let x = features.primitive().clone();
+                let w = weight.primitive().clone();
+                let out = B::sparse_conv(x.clone(), w.clone(), map.clone());
+                prep.finish((x, w, map), out)
+            }
+            OpsKind::UnTracked(prep) => prep.finish(B::sparse_conv(features.into_primitive(), weight.into_primitive(), map)),
+        }
+    }
+}

@@ -1,0 +1,277 @@
+//! The sparse convolution written once, over plain slices: forward, feature gradient, weight
+//! gradient. Every CPU backend calls these; the GPU path computes the same sums.
+//!
+//! Determinism: work is split into tiles whose size depends only on the problem, never on the
+//! number of threads, and every sum is taken in a fixed order, so results are bit-identical at any
+//! thread count (no atomics, no scatter into rows another task owns).
+
+use rayon::prelude::*;
+
+use crate::kernel_map::{NONE, NeighborTable, OffsetPairs};
+
+/// Output rows per task of the gather-GEMM kernel.
+const TILE_ROWS: usize = 256;
+/// Pairs per partial sum of the weight gradient.
+const GRAD_CHUNK: usize = 2048;
+
+/// A float type the kernels run on, with its GEMM.
+pub trait Element: Copy + Send + Sync + Default + std::ops::AddAssign + 'static {
+    /// `C = A·B + beta·C` with arbitrary strides (matrixmultiply's contract).
+    ///
+    /// # Safety
+    /// The pointers and strides must describe valid `m×k`, `k×n` and `m×n` matrices.
+    #[allow(clippy::too_many_arguments)]
+    unsafe fn gemm(
+        m: usize, k: usize, n: usize,
+        a: *const Self, rsa: isize, csa: isize,
+        b: *const Self, rsb: isize, csb: isize,
+        beta: Self, c: *mut Self, rsc: isize, csc: isize,
+    );
+    const ZERO: Self;
+    const ONE: Self;
+}
+
+impl Element for f32 {
+    unsafe fn gemm(
+        m: usize, k: usize, n: usize,
+        a: *const f32, rsa: isize, csa: isize,
+        b: *const f32, rsb: isize, csb: isize,
+        beta: f32, c: *mut f32, rsc: isize, csc: isize,
+    ) {
+        unsafe { matrixmultiply::sgemm(m, k, n, 1.0, a, rsa, csa, b, rsb, csb, beta, c, rsc, csc) }
+    }
+    const ZERO: f32 = 0.0;
+    const ONE: f32 = 1.0;
+}
+
+impl Element for f64 {
+    unsafe fn gemm(
+        m: usize, k: usize, n: usize,
+        a: *const f64, rsa: isize, csa: isize,
+        b: *const f64, rsb: isize, csb: isize,
+        beta: f64, c: *mut f64, rsc: isize, csc: isize,
+    ) {
+        unsafe { matrixmultiply::dgemm(m, k, n, 1.0, a, rsa, csa, b, rsb, csb, beta, c, rsc, csc) }
+    }
+    const ZERO: f64 = 0.0;
+    const ONE: f64 = 1.0;
+}
+
+/// How a gather reads the weight `[K, C_in, C_out]`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum WeightUse {
+    /// `W_k` as stored: the forward.
+    Direct,
+    /// `W_kᵀ`: the feature gradient, gathered over the transposed map.
+    Transposed,
+}
+
+/// `out[o] = Σ_k x[table[o, k]] · W_k` for every output row of `table`.
+///
+/// `x` is `rows_in × c_in`; `weight` is `[K, C_in, C_out]` (read as `W_kᵀ` with
+/// [`WeightUse::Transposed`], in which case `c_in` = C_out and the result has C_in columns).
+pub fn gather_conv<T: Element>(
+    x: &[T],
+    c_in: usize,
+    weight: &[T],
+    c_out: usize,
+    weight_use: WeightUse,
+    table: &NeighborTable,
+) -> Vec<T> {
+    let volume = table.volume();
+    let n_out = table.rows();
+    assert_eq!(weight.len(), volume * c_in * c_out, "weight does not match the map and channels");
+    let mut out = vec![T::ZERO; n_out * c_out];
+    if n_out == 0 || c_out == 0 {
+        return out;
+    }
+    let (rsb, csb) = match weight_use {
+        WeightUse::Direct => (c_out as isize, 1),
+        WeightUse::Transposed => (1, c_in as isize),
+    };
+    out.par_chunks_mut(TILE_ROWS * c_out).enumerate().for_each_init(
+        || (vec![T::ZERO; TILE_ROWS * c_in], vec![T::ZERO; TILE_ROWS * c_out], vec![0usize; TILE_ROWS]),
+        |(gathered, product, rows), (tile, out_tile)| {
+            let first = tile * TILE_ROWS;
+            let len = out_tile.len() / c_out;
+            for k in 0..volume {
+                let mut m = 0;
+                for r in 0..len {
+                    let i = table.row(first + r)[k];
+                    if i != NONE {
+                        let i = i as usize;
+                        gathered[m * c_in..(m + 1) * c_in].copy_from_slice(&x[i * c_in..(i + 1) * c_in]);
+                        rows[m] = r;
+                        m += 1;
+                    }
+                }
+                if m == 0 {
+                    continue;
+                }
+                let w = weight[k * c_in * c_out..].as_ptr();
+                if m == len {
+                    // Every row of the tile has a partner here (always true at the centre offset):
+                    // accumulate straight into the tile.
+                    unsafe {
+                        T::gemm(m, c_in, c_out, gathered.as_ptr(), c_in as isize, 1, w, rsb, csb, T::ONE, out_tile.as_mut_ptr(), c_out as isize, 1);
+                    }
+                } else {
+                    unsafe {
+                        T::gemm(m, c_in, c_out, gathered.as_ptr(), c_in as isize, 1, w, rsb, csb, T::ZERO, product.as_mut_ptr(), c_out as isize, 1);
+                    }
+                    for (j, &r) in rows[..m].iter().enumerate() {
+                        let dst = &mut out_tile[r * c_out..(r + 1) * c_out];
+                        for (d, &p) in dst.iter_mut().zip(&product[j * c_out..(j + 1) * c_out]) {
+                            *d += p;
+                        }
+                    }
+                }
+            }
+        },
+    );
+    out
+}
+
+/// `dW_k = Σ_{(i, o) ∈ M_k} x[i]ᵀ · g[o]`, as `[K, C_in, C_out]`.
+///
+/// Each offset's pairs are cut into fixed chunks whose partial products are summed in chunk order.
+pub fn weight_grad<T: Element>(x: &[T], c_in: usize, grad_out: &[T], c_out: usize, pairs: &OffsetPairs) -> Vec<T> {
+    let volume = pairs.start.len() - 1;
+    let block = c_in * c_out;
+    let mut chunks = Vec::new();
+    for k in 0..volume {
+        let (s, e) = (pairs.start[k], pairs.start[k + 1]);
+        let mut a = s;
+        while a < e {
+            let b = (a + GRAD_CHUNK).min(e);
+            chunks.push((k, a, b));
+            a = b;
+        }
+    }
+    let mut partials = vec![T::ZERO; chunks.len() * block];
+    if block > 0 {
+        partials.par_chunks_mut(block).zip(chunks.par_iter()).for_each_init(
+            || (vec![T::ZERO; GRAD_CHUNK * c_in], vec![T::ZERO; GRAD_CHUNK * c_out]),
+            |(xs, gs), (partial, &(_, a, b))| {
+                let m = b - a;
+                for (j, p) in (a..b).enumerate() {
+                    let i = pairs.input[p] as usize;
+                    let o = pairs.output[p] as usize;
+                    xs[j * c_in..(j + 1) * c_in].copy_from_slice(&x[i * c_in..(i + 1) * c_in]);
+                    gs[j * c_out..(j + 1) * c_out].copy_from_slice(&grad_out[o * c_out..(o + 1) * c_out]);
+                }
+                // (c_in × m) · (m × c_out): the gathered inputs read transposed through strides.
+                unsafe {
+                    T::gemm(c_in, m, c_out, xs.as_ptr(), 1, c_in as isize, gs.as_ptr(), c_out as isize, 1, T::ZERO, partial.as_mut_ptr(), c_out as isize, 1);
+                }
+            },
+        );
+    }
+    let mut grad = vec![T::ZERO; volume * block];
+    if block > 0 {
+        grad.par_chunks_mut(block).enumerate().for_each(|(k, dst)| {
+            for (c, &(ck, _, _)) in chunks.iter().enumerate() {
+                if ck == k {
+                    for (d, &p) in dst.iter_mut().zip(&partials[c * block..(c + 1) * block]) {
+                        *d += p;
+                    }
+                }
+            }
+        });
+    }
+    grad
+}
+
+/// Rows per GEMM of the offset-major kernel.
+const CHUNK_ROWS: usize = 256;
+
+/// Which side of each pair a pass gathers from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PairDirection {
+    /// Gather inputs, scatter to outputs: the forward.
+    Forward,
+    /// Gather output gradients, scatter to inputs: the feature gradient.
+    Backward,
+}
+
+struct SyncPtr<T>(*mut T);
+unsafe impl<T> Send for SyncPtr<T> {}
+unsafe impl<T> Sync for SyncPtr<T> {}
+
+/// Offset-major gather–GEMM–scatter: for each offset in a fixed order, its pairs in chunks of
+/// [`CHUNK_ROWS`] (gather rows, one GEMM with `W_k`, add the products to their destination rows).
+///
+/// Within one offset every destination row appears at most once, so chunks of an offset run in
+/// parallel without conflicts, and each row sums its offsets in the same order at any thread
+/// count. `identity` names an offset whose pairs are `(r, r)` for every row (the submanifold
+/// centre): it runs first as a plain GEMM that initialises the output.
+#[allow(clippy::too_many_arguments)]
+pub fn pair_conv<T: Element>(
+    src: &[T],
+    c_src: usize,
+    weight: &[T],
+    c_dst: usize,
+    n_dst: usize,
+    direction: PairDirection,
+    pairs: &OffsetPairs,
+    identity: Option<usize>,
+) -> Vec<T> {
+    let volume = pairs.start.len() - 1;
+    assert_eq!(weight.len(), volume * c_src * c_dst, "weight does not match the map and channels");
+    let mut out = vec![T::ZERO; n_dst * c_dst];
+    if n_dst == 0 || c_dst == 0 {
+        return out;
+    }
+    // Forward reads W_k (c_in × c_out) as stored; backward reads W_kᵀ.
+    let (rsb, csb) = match direction {
+        PairDirection::Forward => (c_dst as isize, 1),
+        PairDirection::Backward => (1, c_src as isize),
+    };
+    let (gather_side, scatter_side) = match direction {
+        PairDirection::Forward => (&pairs.input, &pairs.output),
+        PairDirection::Backward => (&pairs.output, &pairs.input),
+    };
+    if let Some(k) = identity {
+        let w = &weight[k * c_src * c_dst..];
+        out.par_chunks_mut(CHUNK_ROWS * c_dst).zip(src.par_chunks(CHUNK_ROWS * c_src)).for_each(|(dst, rows)| {
+            let m = rows.len() / c_src.max(1);
+            unsafe {
+                T::gemm(m, c_src, c_dst, rows.as_ptr(), c_src as isize, 1, w.as_ptr(), rsb, csb, T::ZERO, dst.as_mut_ptr(), c_dst as isize, 1);
+            }
+        });
+    }
+    let out_ptr = SyncPtr(out.as_mut_ptr());
+    for k in (0..volume).filter(|&k| Some(k) != identity) {
+        let (s, e) = (pairs.start[k], pairs.start[k + 1]);
+        if s == e {
+            continue;
+        }
+        let w = &weight[k * c_src * c_dst..];
+        let out_ptr = &out_ptr;
+        let chunks = (e - s).div_ceil(CHUNK_ROWS);
+        (0..chunks).into_par_iter().for_each_init(
+            || (vec![T::ZERO; CHUNK_ROWS * c_src], vec![T::ZERO; CHUNK_ROWS * c_dst]),
+            |(gathered, product), chunk| {
+                let a = s + chunk * CHUNK_ROWS;
+                let b = (a + CHUNK_ROWS).min(e);
+                let m = b - a;
+                for (j, &r) in gather_side[a..b].iter().enumerate() {
+                    let r = r as usize;
+                    gathered[j * c_src..(j + 1) * c_src].copy_from_slice(&src[r * c_src..(r + 1) * c_src]);
+                }
+                unsafe {
+                    T::gemm(m, c_src, c_dst, gathered.as_ptr(), c_src as isize, 1, w.as_ptr(), rsb, csb, T::ZERO, product.as_mut_ptr(), c_dst as isize, 1);
+                }
+                for (j, &r) in scatter_side[a..b].iter().enumerate() {
+                    // SAFETY: within offset k each destination row appears once, so no two tasks
+                    // touch the same row; offsets run one after another.
+                    let dst = unsafe { std::slice::from_raw_parts_mut(out_ptr.0.add(r as usize * c_dst), c_dst) };
+                    for (d, &p) in dst.iter_mut().zip(&product[j * c_dst..(j + 1) * c_dst]) {
+                        *d += p;
+                    }
+                }
+            },
+        );
+    }
+    out
+}

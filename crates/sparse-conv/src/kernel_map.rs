@@ -1,0 +1,335 @@
+//! Kernel maps (rulebooks): which input row feeds which output row through which kernel offset.
+
+use std::fmt;
+use std::sync::{Arc, OnceLock};
+
+use rayon::prelude::*;
+
+use crate::coords::{Coord, CoordError, CoordIndex, pack};
+
+/// Marks "no row" in a [`NeighborTable`].
+pub const NONE: u32 = u32::MAX;
+
+/// For each row of one side of a map, the row of the other side at each kernel offset.
+///
+/// Row-major `rows × volume`; `NONE` where nothing is there. Every map kind of the network has at
+/// most one partner per (row, offset), so one table per direction describes a map completely.
+pub struct NeighborTable {
+    rows: usize,
+    volume: usize,
+    data: Vec<u32>,
+}
+
+impl NeighborTable {
+    fn empty(rows: usize, volume: usize) -> Self {
+        Self { rows, volume, data: vec![NONE; rows * volume] }
+    }
+
+    /// Rows of this side.
+    pub fn rows(&self) -> usize {
+        self.rows
+    }
+
+    /// Kernel volume (offsets per row).
+    pub fn volume(&self) -> usize {
+        self.volume
+    }
+
+    /// The partners of `row`, one per offset.
+    #[inline]
+    pub fn row(&self, row: usize) -> &[u32] {
+        &self.data[row * self.volume..(row + 1) * self.volume]
+    }
+
+    /// The whole table, row-major.
+    pub fn as_slice(&self) -> &[u32] {
+        &self.data
+    }
+}
+
+/// The (input, output) pairs of a map grouped by offset: the layout of the weight gradient.
+pub struct OffsetPairs {
+    /// `start[k]..start[k + 1]` indexes the pairs of offset `k`.
+    pub start: Vec<usize>,
+    pub input: Vec<u32>,
+    pub output: Vec<u32>,
+}
+
+/// What a map computes, which also keys the cache of a [`crate::SparseTensor`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum MapKind {
+    /// Odd kernel `k`, output coordinates = input coordinates.
+    Submanifold { kernel: usize },
+    /// Kernel = stride = `kernel`: outputs at `floor(c / (kernel·s))·(kernel·s)`.
+    Down { kernel: usize },
+    /// The transposed `Down` map: outputs land on the finer level's coordinates.
+    Up { kernel: usize },
+}
+
+/// A rulebook between an input and an output coordinate set.
+///
+/// `out_table` drives the forward (output-stationary gather), `in_table` the feature gradient
+/// (the same gather over the transposed map); transposing a map swaps them at no cost.
+pub struct KernelMap {
+    kind: MapKind,
+    n_in: usize,
+    n_out: usize,
+    out_table: Arc<NeighborTable>,
+    in_table: Arc<NeighborTable>,
+    pairs: OnceLock<OffsetPairs>,
+}
+
+impl fmt::Debug for KernelMap {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("KernelMap")
+            .field("kind", &self.kind)
+            .field("n_in", &self.n_in)
+            .field("n_out", &self.n_out)
+            .field("pairs", &self.num_pairs())
+            .finish()
+    }
+}
+
+impl KernelMap {
+    /// What this map computes.
+    pub fn kind(&self) -> MapKind {
+        self.kind
+    }
+
+    /// Rows of the input coordinate set.
+    pub fn n_in(&self) -> usize {
+        self.n_in
+    }
+
+    /// Rows of the output coordinate set.
+    pub fn n_out(&self) -> usize {
+        self.n_out
+    }
+
+    /// Number of kernel offsets (the weight's first dimension).
+    pub fn volume(&self) -> usize {
+        self.out_table.volume
+    }
+
+    /// For each output row, its input row at each offset.
+    pub fn out_table(&self) -> &NeighborTable {
+        &self.out_table
+    }
+
+    /// For each input row, its output row at each offset.
+    pub fn in_table(&self) -> &NeighborTable {
+        &self.in_table
+    }
+
+    /// Number of (input, output) pairs over all offsets.
+    pub fn num_pairs(&self) -> usize {
+        self.out_table.data.iter().filter(|&&i| i != NONE).count()
+    }
+
+    /// The pairs grouped by offset, ordered by output row within an offset; built on first use.
+    pub fn pairs(&self) -> &OffsetPairs {
+        self.pairs.get_or_init(|| {
+            let table = &*self.out_table;
+            let mut start = Vec::with_capacity(table.volume + 1);
+            let (mut input, mut output) = (Vec::new(), Vec::new());
+            for k in 0..table.volume {
+                start.push(input.len());
+                for o in 0..table.rows {
+                    let i = table.data[o * table.volume + k];
+                    if i != NONE {
+                        input.push(i);
+                        output.push(o as u32);
+                    }
+                }
+            }
+            start.push(input.len());
+            OffsetPairs { start, input, output }
+        })
+    }
+
+    /// The same rulebook read backwards: inputs become outputs, offsets keep their index.
+    pub fn transposed(&self) -> KernelMap {
+        let kind = match self.kind {
+            MapKind::Down { kernel } => MapKind::Up { kernel },
+            MapKind::Up { kernel } => MapKind::Down { kernel },
+            k @ MapKind::Submanifold { .. } => k,
+        };
+        KernelMap {
+            kind,
+            n_in: self.n_out,
+            n_out: self.n_in,
+            out_table: self.in_table.clone(),
+            in_table: self.out_table.clone(),
+            pairs: OnceLock::new(),
+        }
+    }
+
+    /// Submanifold map of an odd `kernel` over `coords` at tensor stride `stride`.
+    ///
+    /// Offset `k` is `(dx, dy, dz)·stride` with each of dx, dy, dz in `-r..=r` (r = kernel / 2),
+    /// enumerated x-major; the centre is `k = volume / 2` and offset `volume - 1 - k` is the
+    /// negation of offset `k`, which lets the build look up half of the neighbours.
+    pub fn submanifold(coords: &[Coord], index: &CoordIndex, kernel: usize, stride: i32) -> KernelMap {
+        assert!(kernel % 2 == 1, "submanifold kernel size must be odd, got {kernel}");
+        let offsets = offsets(kernel, -(kernel as i32 / 2), stride);
+        let volume = offsets.len();
+        let centre = volume / 2;
+        let n = coords.len();
+        let mut table = NeighborTable::empty(n, volume);
+        table.data.par_chunks_mut(volume).zip(coords.par_iter()).enumerate().for_each(
+            |(o, (row, c))| {
+                for (k, d) in offsets[..centre].iter().enumerate() {
+                    let q = [c[0] as i64, c[1] as i64 + d[0] as i64, c[2] as i64 + d[1] as i64, c[3] as i64 + d[2] as i64];
+                    if let Some(i) = lookup(index, q) {
+                        row[k] = i;
+                    }
+                }
+                row[centre] = o as u32;
+            },
+        );
+        // Mirror: if o sees i at offset k, then i sees o at the negated offset.
+        for o in 0..n {
+            for k in 0..centre {
+                let i = table.data[o * volume + k];
+                if i != NONE {
+                    table.data[i as usize * volume + (volume - 1 - k)] = o as u32;
+                }
+            }
+        }
+        let in_table = mirror(&table);
+        KernelMap {
+            kind: MapKind::Submanifold { kernel },
+            n_in: n,
+            n_out: n,
+            out_table: Arc::new(table),
+            in_table: Arc::new(in_table),
+            pairs: OnceLock::new(),
+        }
+    }
+
+    /// Down-sampling map with kernel = stride = `kernel` from tensor stride `stride`.
+    ///
+    /// Returns the map and the output coordinates `floor(c / (kernel·stride))·(kernel·stride)`,
+    /// in order of first appearance in `coords` (so the result does not depend on threads).
+    pub fn down(coords: &[Coord], kernel: usize, stride: i32) -> Result<(KernelMap, Vec<Coord>), CoordError> {
+        assert!(kernel >= 1, "down-sampling kernel must be at least 1");
+        let out_stride = stride * kernel as i32;
+        let volume = kernel * kernel * kernel;
+        let mut index = CoordIndex::with_capacity(coords.len() / 2 + 1);
+        let mut out_coords: Vec<Coord> = Vec::new();
+        let mut in_table = NeighborTable::empty(coords.len(), volume);
+        let mut parent_of = Vec::with_capacity(coords.len());
+        for (i, &c) in coords.iter().enumerate() {
+            let p = [c[0], c[1].div_euclid(out_stride) * out_stride, c[2].div_euclid(out_stride) * out_stride, c[3].div_euclid(out_stride) * out_stride];
+            let rel = [c[1] - p[1], c[2] - p[2], c[3] - p[3]];
+            if rel.iter().any(|r| r % stride != 0) {
+                return Err(CoordError::OffGrid { row: i, coord: c, stride });
+            }
+            let k = ((rel[0] / stride) as usize * kernel + (rel[1] / stride) as usize) * kernel + (rel[2] / stride) as usize;
+            let key = pack(p).ok_or(CoordError::OutOfRange { row: i, coord: c })?;
+            let o = match index.insert(key, out_coords.len() as u32) {
+                Ok(()) => {
+                    out_coords.push(p);
+                    out_coords.len() as u32 - 1
+                }
+                Err(existing) => existing,
+            };
+            in_table.data[i * volume + k] = o;
+            parent_of.push((o, k));
+        }
+        let mut out_table = NeighborTable::empty(out_coords.len(), volume);
+        for (i, &(o, k)) in parent_of.iter().enumerate() {
+            let slot = &mut out_table.data[o as usize * volume + k];
+            if *slot != NONE {
+                return Err(CoordError::Duplicate { first: *slot as usize, second: i, coord: coords[i] });
+            }
+            *slot = i as u32;
+        }
+        let map = KernelMap {
+            kind: MapKind::Down { kernel },
+            n_in: coords.len(),
+            n_out: out_coords.len(),
+            out_table: Arc::new(out_table),
+            in_table: Arc::new(in_table),
+            pairs: OnceLock::new(),
+        };
+        Ok((map, out_coords))
+    }
+}
+
+/// Kernel offsets `(dx, dy, dz)·stride`, each of dx, dy, dz in `lo..lo + kernel`, x-major.
+fn offsets(kernel: usize, lo: i32, stride: i32) -> Vec<[i32; 3]> {
+    let r = lo..lo + kernel as i32;
+    let mut out = Vec::with_capacity(kernel.pow(3));
+    for dx in r.clone() {
+        for dy in r.clone() {
+            for dz in r.clone() {
+                out.push([dx * stride, dy * stride, dz * stride]);
+            }
+        }
+    }
+    out
+}
+
+#[inline]
+fn lookup(index: &CoordIndex, q: [i64; 4]) -> Option<u32> {
+    let c: [i32; 4] = [
+        i32::try_from(q[0]).ok()?,
+        i32::try_from(q[1]).ok()?,
+        i32::try_from(q[2]).ok()?,
+        i32::try_from(q[3]).ok()?,
+    ];
+    index.get(c)
+}
+
+/// The in-side table of a submanifold map: input `i` feeds output `o` at offset `k` exactly when
+/// `o`'s partner at `k` is `i`, i.e. `i`'s partner at the negated offset is `o`.
+fn mirror(table: &NeighborTable) -> NeighborTable {
+    let volume = table.volume;
+    let mut out = NeighborTable::empty(table.rows, volume);
+    out.data.par_chunks_mut(volume).zip(table.data.par_chunks(volume)).for_each(|(dst, src)| {
+        for k in 0..volume {
+            dst[k] = src[volume - 1 - k];
+        }
+    });
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn submanifold_tables_are_consistent() {
+        let coords = vec![[0, 0, 0, 0], [0, 1, 0, 0], [0, 1, 1, 1], [1, 0, 0, 1], [0, -1, -1, -1], [0, 5, 5, 5]];
+        let index = CoordIndex::build(&coords).unwrap();
+        let map = KernelMap::submanifold(&coords, &index, 3, 1);
+        assert_eq!(map.volume(), 27);
+        for o in 0..coords.len() {
+            for k in 0..27 {
+                let i = map.out_table().row(o)[k];
+                if i != NONE {
+                    assert_eq!(map.in_table().row(i as usize)[k], o as u32);
+                }
+            }
+        }
+        // [0,0,0,0] neighbours: itself, [0,1,0,0], [0,1,1,1], [0,-1,-1,-1]; not the other sample.
+        assert_eq!(map.out_table().row(0).iter().filter(|&&i| i != NONE).count(), 4);
+        assert_eq!(map.out_table().row(5).iter().filter(|&&i| i != NONE).count(), 1);
+        assert_eq!(map.num_pairs(), map.pairs().input.len());
+    }
+
+    #[test]
+    fn down_map_groups_children_under_floor_parents() {
+        let coords = vec![[0, -1, 0, 0], [0, -2, 1, 1], [0, 0, 0, 0], [1, 0, 0, 0], [0, 3, 3, 3]];
+        let (map, out) = KernelMap::down(&coords, 2, 1).unwrap();
+        assert_eq!(out, vec![[0, -2, 0, 0], [0, 0, 0, 0], [1, 0, 0, 0], [0, 2, 2, 2]]);
+        assert_eq!(map.in_table().row(0)[4], 0); // (-1,0,0) - (-2,0,0) = (1,0,0) → k = 4
+        assert_eq!(map.in_table().row(1)[3], 0); // (0,1,1) → k = 3
+        assert_eq!(map.out_table().row(3)[7], 4);
+        let up = map.transposed();
+        assert_eq!((up.n_in(), up.n_out()), (4, 5));
+        assert_eq!(up.kind(), MapKind::Up { kernel: 2 });
+        assert_eq!(up.out_table().row(4)[7], 3);
+    }
+}

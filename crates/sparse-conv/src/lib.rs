@@ -1,0 +1,28 @@
+//! Sparse 3D convolution for Burn: voxel coordinates, kernel maps, a differentiable op with its
+//! own backward on every backend, and the modules a sparse U-Net is built from.
+//!
+//! - [`coords`]: batch-indexed voxel coordinates and their hash index.
+//! - [`kernel_map`]: rulebooks for submanifold, down-sampling and transposed convolutions.
+//! - [`cpu`]: the op's math over slices (forward, feature and weight gradients).
+//! - [`backend`]: the Burn backend extension and its `Autodiff` backward.
+//! - [`op`]: [`sparse_conv`] on Burn tensors.
+//! - [`tensor`]: [`SparseTensor`], features with coordinates and a shared map cache.
+//! - [`modules`]: convolutions, batch norm, linear and U-Net blocks.
+//! - [`scene`]: voxel scenes for benchmarks (a synthetic LiDAR-like scene, `.npy` files).
+
+pub mod backend;
+pub mod coords;
+pub mod cpu;
+pub mod kernel_map;
+pub mod modules;
+pub mod op;
+pub mod scene;
+pub mod tensor;
+
+pub use backend::SparseConvBackend;
+pub use coords::{Coord, CoordError, CoordIndex};
+pub use kernel_map::{KernelMap, MapKind, NeighborTable};
+pub use op::sparse_conv;
+pub use tensor::{MapCache, SparseTensor};
+
+pub use burn;

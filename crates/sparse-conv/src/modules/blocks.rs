@@ -1,0 +1,126 @@
+//! The blocks of a sparse U-Net (SPVNAS MinkUNet, spec §1.6).
+
+use burn::config::Config;
+use burn::module::Module;
+use burn::tensor::Device;
+
+use super::{
+    SparseBatchNorm, SparseBatchNormConfig, SparseConv3d, SparseConv3dConfig, SparseConvTranspose3d,
+    SparseConvTranspose3dConfig, SubmanifoldConv3d, SubmanifoldConv3dConfig, relu,
+};
+use crate::SparseTensor;
+
+/// Configuration of a [`ConvBnRelu`].
+#[derive(Config, Debug)]
+pub struct ConvBnReluConfig {
+    pub channels: [usize; 2],
+    #[config(default = 2)]
+    pub kernel_size: usize,
+}
+
+/// Down-sampling conv (kernel = stride) → BN → ReLU: `BasicConvolutionBlock(k=2, s=2)`.
+#[derive(Module, Debug)]
+pub struct ConvBnRelu {
+    pub conv: SparseConv3d,
+    pub norm: SparseBatchNorm,
+}
+
+impl ConvBnReluConfig {
+    pub fn init(&self, device: &Device) -> ConvBnRelu {
+        ConvBnRelu {
+            conv: SparseConv3dConfig::new(self.channels).with_kernel_size(self.kernel_size).init(device),
+            norm: SparseBatchNormConfig::new(self.channels[1]).init(device),
+        }
+    }
+}
+
+impl ConvBnRelu {
+    pub fn forward(&self, x: SparseTensor) -> SparseTensor {
+        relu(self.norm.forward(self.conv.forward(x)))
+    }
+}
+
+/// Configuration of a [`DeconvBnRelu`].
+#[derive(Config, Debug)]
+pub struct DeconvBnReluConfig {
+    pub channels: [usize; 2],
+    #[config(default = 2)]
+    pub kernel_size: usize,
+}
+
+/// Transposed conv → BN → ReLU: `BasicDeconvolutionBlock(k=2, s=2)`.
+#[derive(Module, Debug)]
+pub struct DeconvBnRelu {
+    pub conv: SparseConvTranspose3d,
+    pub norm: SparseBatchNorm,
+}
+
+impl DeconvBnReluConfig {
+    pub fn init(&self, device: &Device) -> DeconvBnRelu {
+        DeconvBnRelu {
+            conv: SparseConvTranspose3dConfig::new(self.channels).with_kernel_size(self.kernel_size).init(device),
+            norm: SparseBatchNormConfig::new(self.channels[1]).init(device),
+        }
+    }
+}
+
+impl DeconvBnRelu {
+    pub fn forward(&self, x: SparseTensor) -> SparseTensor {
+        relu(self.norm.forward(self.conv.forward(x)))
+    }
+}
+
+/// Configuration of a [`ResidualBlock`].
+#[derive(Config, Debug)]
+pub struct ResidualBlockConfig {
+    pub channels: [usize; 2],
+    #[config(default = 3)]
+    pub kernel_size: usize,
+}
+
+/// `relu([conv → BN → ReLU → conv → BN](x) + shortcut(x))`; the shortcut is the identity when
+/// the channels match, else a 1×1×1 conv → BN.
+#[derive(Module, Debug)]
+pub struct ResidualBlock {
+    pub conv1: SubmanifoldConv3d,
+    pub norm1: SparseBatchNorm,
+    pub conv2: SubmanifoldConv3d,
+    pub norm2: SparseBatchNorm,
+    pub shortcut: Option<Shortcut>,
+}
+
+/// The projection shortcut of a [`ResidualBlock`] whose channels change: 1×1×1 conv → BN.
+#[derive(Module, Debug)]
+pub struct Shortcut {
+    pub conv: SubmanifoldConv3d,
+    pub norm: SparseBatchNorm,
+}
+
+impl ResidualBlockConfig {
+    pub fn init(&self, device: &Device) -> ResidualBlock {
+        let [c_in, c_out] = self.channels;
+        let k = self.kernel_size;
+        ResidualBlock {
+            conv1: SubmanifoldConv3dConfig::new([c_in, c_out]).with_kernel_size(k).init(device),
+            norm1: SparseBatchNormConfig::new(c_out).init(device),
+            conv2: SubmanifoldConv3dConfig::new([c_out, c_out]).with_kernel_size(k).init(device),
+            norm2: SparseBatchNormConfig::new(c_out).init(device),
+            shortcut: (c_in != c_out).then(|| Shortcut {
+                conv: SubmanifoldConv3dConfig::new([c_in, c_out]).with_kernel_size(1).init(device),
+                norm: SparseBatchNormConfig::new(c_out).init(device),
+            }),
+        }
+    }
+}
+
+impl ResidualBlock {
+    pub fn forward(&self, x: SparseTensor) -> SparseTensor {
+        let main = relu(self.norm1.forward(self.conv1.forward(x.clone())));
+        let main = self.norm2.forward(self.conv2.forward(main));
+        let skip = match &self.shortcut {
+            Some(shortcut) => shortcut.norm.forward(shortcut.conv.forward(x)),
+            None => x,
+        };
+        relu(main.with_features(main.features() + skip.into_features()))
+    }
+}

@@ -1,0 +1,126 @@
+//! The three sparse convolutions: submanifold, strided down-sampling, transposed up-sampling.
+
+use burn::config::Config;
+use burn::module::{Module, Param};
+use burn::nn::Initializer;
+use burn::tensor::{Device, Tensor};
+
+use crate::SparseTensor;
+use crate::op::sparse_conv;
+
+/// `U(±bound)` for a `[K, C_in, C_out]` weight.
+fn uniform_weight(volume: usize, c_in: usize, c_out: usize, bound: f64, device: &Device) -> Param<Tensor<3>> {
+    Initializer::Uniform { min: -bound, max: bound }.init([volume, c_in, c_out], device)
+}
+
+/// Configuration of a [`SubmanifoldConv3d`].
+#[derive(Config, Debug)]
+pub struct SubmanifoldConv3dConfig {
+    /// Input and output channels.
+    pub channels: [usize; 2],
+    /// Odd kernel size (3 in the network; 1 is a per-voxel matmul).
+    #[config(default = 3)]
+    pub kernel_size: usize,
+}
+
+/// Submanifold convolution: outputs on the input voxels, neighbours `{−r..r}³·stride`, no bias.
+#[derive(Module, Debug)]
+pub struct SubmanifoldConv3d {
+    /// `[K, C_in, C_out]`, offsets x-major (see [`crate::KernelMap::submanifold`]).
+    pub weight: Param<Tensor<3>>,
+    pub kernel_size: usize,
+}
+
+impl SubmanifoldConv3dConfig {
+    /// Weights `U(±1/√(C_in·K))`, torchsparse's initialisation (spec §1.6).
+    pub fn init(&self, device: &Device) -> SubmanifoldConv3d {
+        assert!(self.kernel_size % 2 == 1, "submanifold kernel size must be odd, got {}", self.kernel_size);
+        let [c_in, c_out] = self.channels;
+        let volume = self.kernel_size.pow(3);
+        let bound = 1.0 / ((c_in * volume) as f64).sqrt();
+        SubmanifoldConv3d { weight: uniform_weight(volume, c_in, c_out, bound, device), kernel_size: self.kernel_size }
+    }
+}
+
+impl SubmanifoldConv3d {
+    pub fn forward(&self, x: SparseTensor) -> SparseTensor {
+        let weight = self.weight.val();
+        if self.kernel_size == 1 {
+            // A 1×1×1 kernel only pairs each voxel with itself: a plain matmul, no map needed.
+            let [_, c_in, c_out] = weight.dims();
+            let features = x.features().matmul(weight.reshape([c_in, c_out]));
+            return x.with_features(features);
+        }
+        let map = x.submanifold_map(self.kernel_size);
+        let features = sparse_conv(x.features(), weight, &map);
+        x.with_features(features)
+    }
+}
+
+/// Configuration of a [`SparseConv3d`].
+#[derive(Config, Debug)]
+pub struct SparseConv3dConfig {
+    pub channels: [usize; 2],
+    /// Kernel size, equal to the stride (2 in the network).
+    #[config(default = 2)]
+    pub kernel_size: usize,
+}
+
+/// Strided down-sampling convolution (kernel = stride): each coarse voxel sums its children.
+#[derive(Module, Debug)]
+pub struct SparseConv3d {
+    pub weight: Param<Tensor<3>>,
+    pub kernel_size: usize,
+}
+
+impl SparseConv3dConfig {
+    /// Weights `U(±1/√(C_in·K))` (spec §1.6).
+    pub fn init(&self, device: &Device) -> SparseConv3d {
+        let [c_in, c_out] = self.channels;
+        let volume = self.kernel_size.pow(3);
+        let bound = 1.0 / ((c_in * volume) as f64).sqrt();
+        SparseConv3d { weight: uniform_weight(volume, c_in, c_out, bound, device), kernel_size: self.kernel_size }
+    }
+}
+
+impl SparseConv3d {
+    pub fn forward(&self, x: SparseTensor) -> SparseTensor {
+        let (map, coords) = x.down_map(self.kernel_size);
+        let features = sparse_conv(x.features(), self.weight.val(), &map);
+        x.on_level(features, coords, x.stride() * self.kernel_size as i32)
+    }
+}
+
+/// Configuration of a [`SparseConvTranspose3d`].
+#[derive(Config, Debug)]
+pub struct SparseConvTranspose3dConfig {
+    pub channels: [usize; 2],
+    #[config(default = 2)]
+    pub kernel_size: usize,
+}
+
+/// Transposed convolution that reuses the down-sampling map of the same forward pass, so its
+/// outputs land exactly on the finer level's voxels (spec §1.7).
+#[derive(Module, Debug)]
+pub struct SparseConvTranspose3d {
+    pub weight: Param<Tensor<3>>,
+    pub kernel_size: usize,
+}
+
+impl SparseConvTranspose3dConfig {
+    /// Weights `U(±1/√C_out)`: torchsparse 1.2's operator-precedence quirk, kept (spec §1.6).
+    pub fn init(&self, device: &Device) -> SparseConvTranspose3d {
+        let [c_in, c_out] = self.channels;
+        let volume = self.kernel_size.pow(3);
+        let bound = 1.0 / (c_out as f64).sqrt();
+        SparseConvTranspose3d { weight: uniform_weight(volume, c_in, c_out, bound, device), kernel_size: self.kernel_size }
+    }
+}
+
+impl SparseConvTranspose3d {
+    pub fn forward(&self, x: SparseTensor) -> SparseTensor {
+        let (map, coords, fine) = x.up_map(self.kernel_size);
+        let features = sparse_conv(x.features(), self.weight.val(), &map);
+        x.on_level(features, coords, fine)
+    }
+}

@@ -1,0 +1,209 @@
+//! `SparseTensor`: voxel features with their coordinates, tensor stride and shared map cache.
+
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
+
+use burn::tensor::Tensor;
+
+use crate::coords::{Coord, CoordError, CoordIndex};
+use crate::kernel_map::{KernelMap, MapKind};
+
+/// Features `[N, C]` on the voxels `coords` of one level of a sparse network.
+///
+/// Every tensor derived from one input (by convolutions, norms, concatenations) shares one
+/// [`MapCache`], so a U-Net builds each level's coordinates and each kernel map once per forward
+/// pass and its transposed convolutions reuse the down-sampling maps, as torchsparse does.
+#[derive(Clone, Debug)]
+pub struct SparseTensor {
+    features: Tensor<2>,
+    coords: Arc<[Coord]>,
+    stride: i32,
+    cache: Arc<MapCache>,
+}
+
+impl SparseTensor {
+    /// A stride-1 tensor; the coordinates must be unique and in range.
+    pub fn new(features: Tensor<2>, coords: Vec<Coord>) -> Result<Self, CoordError> {
+        let rows = features.dims()[0];
+        if rows != coords.len() {
+            return Err(CoordError::FeatureRows { features: rows, coords: coords.len() });
+        }
+        let index = CoordIndex::build(&coords)?;
+        let coords: Arc<[Coord]> = coords.into();
+        let cache = MapCache::default();
+        {
+            let mut state = cache.state.lock().unwrap();
+            state.levels.insert(1, coords.clone());
+            state.indexes.insert(1, Arc::new(index));
+        }
+        Ok(Self { features, coords, stride: 1, cache: Arc::new(cache) })
+    }
+
+    /// Voxel features, `[N, C]`.
+    pub fn features(&self) -> Tensor<2> {
+        self.features.clone()
+    }
+
+    /// Consumes the tensor, keeping its features.
+    pub fn into_features(self) -> Tensor<2> {
+        self.features
+    }
+
+    /// Voxel coordinates in finest-level units (multiples of the stride).
+    pub fn coords(&self) -> &Arc<[Coord]> {
+        &self.coords
+    }
+
+    /// Tensor stride: the voxel size of this level in finest-level voxels.
+    pub fn stride(&self) -> i32 {
+        self.stride
+    }
+
+    /// Number of voxels.
+    pub fn num_voxels(&self) -> usize {
+        self.coords.len()
+    }
+
+    /// Number of feature channels.
+    pub fn channels(&self) -> usize {
+        self.features.dims()[1]
+    }
+
+    /// The same voxels with other features (same rows).
+    pub fn with_features(&self, features: Tensor<2>) -> Self {
+        assert_eq!(features.dims()[0], self.coords.len(), "new features must keep one row per voxel");
+        Self { features, coords: self.coords.clone(), stride: self.stride, cache: self.cache.clone() }
+    }
+
+    /// Applies `f` to the features.
+    pub fn map_features(self, f: impl FnOnce(Tensor<2>) -> Tensor<2>) -> Self {
+        let features = f(self.features);
+        Self { features, ..self }
+    }
+
+    /// Concatenates the channels of two tensors on identical coordinates: `[self, other]`.
+    pub fn cat(&self, other: &SparseTensor) -> Self {
+        assert!(
+            self.stride == other.stride
+                && (Arc::ptr_eq(&self.coords, &other.coords) || self.coords == other.coords),
+            "sparse concatenation needs identical coordinates (strides {} and {})",
+            self.stride,
+            other.stride
+        );
+        self.with_features(Tensor::cat(vec![self.features.clone(), other.features.clone()], 1))
+    }
+
+    /// The submanifold map of an odd `kernel` at this level, built once per cache.
+    pub fn submanifold_map(&self, kernel: usize) -> Arc<KernelMap> {
+        let key = (MapKind::Submanifold { kernel }, self.stride);
+        if let Some(map) = self.cache.get(key) {
+            return map;
+        }
+        let index = self.cache.index(self.stride, &self.coords);
+        let map = Arc::new(KernelMap::submanifold(&self.coords, &index, kernel, self.stride));
+        self.cache.insert(key, map.clone());
+        map
+    }
+
+    /// The down-sampling map (kernel = stride = `kernel`) from this level and the coarser level's
+    /// coordinates, built once per cache.
+    pub fn down_map(&self, kernel: usize) -> (Arc<KernelMap>, Arc<[Coord]>) {
+        let key = (MapKind::Down { kernel }, self.stride);
+        let out_stride = self.stride * kernel as i32;
+        if let Some(map) = self.cache.get(key) {
+            return (map, self.cache.level(out_stride).expect("a cached down map has its level"));
+        }
+        let (map, coords) = KernelMap::down(&self.coords, kernel, self.stride)
+            .expect("coordinates of a sparse tensor are validated and on their level's grid");
+        let (map, coords) = (Arc::new(map), Arc::<[Coord]>::from(coords));
+        self.cache.insert(key, map.clone());
+        self.cache.state.lock().unwrap().levels.entry(out_stride).or_insert_with(|| coords.clone());
+        (map, self.cache.level(out_stride).unwrap())
+    }
+
+    /// The transposed map back to the finer level this one was down-sampled from with `kernel`,
+    /// and that level's coordinates.
+    ///
+    /// # Panics
+    /// If this level was not made by a down-sampling of `kernel` in the same forward pass.
+    pub fn up_map(&self, kernel: usize) -> (Arc<KernelMap>, Arc<[Coord]>, i32) {
+        let fine = self.stride / kernel as i32;
+        assert!(
+            fine >= 1 && fine * kernel as i32 == self.stride,
+            "a transposed conv of kernel {kernel} cannot run at tensor stride {}",
+            self.stride
+        );
+        let up_key = (MapKind::Up { kernel }, fine);
+        let coords = self.cache.level(fine).expect("the finer level exists when its down map does");
+        if let Some(map) = self.cache.get(up_key) {
+            return (map, coords, fine);
+        }
+        let down = self.cache.get((MapKind::Down { kernel }, fine)).unwrap_or_else(|| {
+            panic!(
+                "a transposed conv at tensor stride {} needs the down-sampling map from stride {fine} built earlier in the same forward pass",
+                self.stride
+            )
+        });
+        let map = Arc::new(down.transposed());
+        self.cache.insert(up_key, map.clone());
+        (map, coords, fine)
+    }
+
+    /// A tensor on another level of the same cache.
+    pub(crate) fn on_level(&self, features: Tensor<2>, coords: Arc<[Coord]>, stride: i32) -> Self {
+        Self { features, coords, stride, cache: self.cache.clone() }
+    }
+}
+
+/// Coordinates of every level and every kernel map of one forward pass.
+#[derive(Default, Debug)]
+pub struct MapCache {
+    state: Mutex<CacheState>,
+}
+
+#[derive(Default, Debug)]
+struct CacheState {
+    levels: HashMap<i32, Arc<[Coord]>>,
+    indexes: HashMap<i32, Arc<CoordIndex>>,
+    maps: HashMap<(MapKind, i32), Arc<KernelMap>>,
+}
+
+impl std::fmt::Debug for CoordIndex {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("CoordIndex")
+    }
+}
+
+impl MapCache {
+    fn get(&self, key: (MapKind, i32)) -> Option<Arc<KernelMap>> {
+        self.state.lock().unwrap().maps.get(&key).cloned()
+    }
+
+    fn insert(&self, key: (MapKind, i32), map: Arc<KernelMap>) {
+        self.state.lock().unwrap().maps.entry(key).or_insert(map);
+    }
+
+    fn level(&self, stride: i32) -> Option<Arc<[Coord]>> {
+        self.state.lock().unwrap().levels.get(&stride).cloned()
+    }
+
+    fn index(&self, stride: i32, coords: &[Coord]) -> Arc<CoordIndex> {
+        if let Some(index) = self.state.lock().unwrap().indexes.get(&stride) {
+            return index.clone();
+        }
+        let index = Arc::new(CoordIndex::build(coords).expect("levels derived from valid coordinates are valid"));
+        self.state.lock().unwrap().indexes.entry(stride).or_insert(index).clone()
+    }
+
+    /// Number of kernel maps built so far.
+    pub fn num_maps(&self) -> usize {
+        self.state.lock().unwrap().maps.len()
+    }
+}
+
+impl SparseTensor {
+    /// The cache shared by every tensor of this forward pass.
+    pub fn cache(&self) -> &Arc<MapCache> {
+        &self.cache
+    }
+}

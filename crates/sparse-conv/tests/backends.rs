@@ -1,0 +1,55 @@
+//! The same random case gives the same outputs and gradients on flex, ndarray and wgpu.
+
+mod common;
+
+use std::sync::Arc;
+
+use common::*;
+use sparse_conv::burn::tensor::{DType, Device};
+use sparse_conv::{CoordIndex, KernelMap, sparse_conv};
+
+struct Outputs {
+    out: Vec<f64>,
+    gx: Vec<f64>,
+    gw: Vec<f64>,
+}
+
+fn run(map: &Arc<KernelMap>, x: &[f64], w: &[f64], g: &[f64], c: [usize; 2], device: &Device) -> Outputs {
+    let ad = device.clone().autodiff();
+    let xt = tensor2(x, [map.n_in(), c[0]], &ad, DType::F32).require_grad();
+    let wt = tensor3(w, [map.volume(), c[0], c[1]], &ad, DType::F32).require_grad();
+    let out = sparse_conv(xt.clone(), wt.clone(), map);
+    let grads = (out.clone() * tensor2(g, [map.n_out(), c[1]], &ad, DType::F32)).sum().backward();
+    Outputs { out: values(out), gx: values(xt.grad(&grads).unwrap()), gw: values(wt.grad(&grads).unwrap()) }
+}
+
+#[test]
+fn flex_ndarray_and_wgpu_agree() {
+    let mut r = rng(21);
+    let coords = random_coords(&mut r, 400, 2, 6, 1);
+    let index = CoordIndex::build(&coords).unwrap();
+    let subm = Arc::new(KernelMap::submanifold(&coords, &index, 3, 1));
+    let (down, _) = KernelMap::down(&coords, 2, 1).unwrap();
+    let up = Arc::new(down.transposed());
+    let down = Arc::new(down);
+    #[allow(deprecated)]
+    let mut devices = vec![("flex", Device::flex()), ("ndarray", Device::ndarray())];
+    if let Some(wgpu) = wgpu_device() {
+        devices.push(("wgpu", wgpu));
+    }
+    eprintln!("comparing flex with: {:?}", devices[1..].iter().map(|(n, _)| *n).collect::<Vec<_>>());
+    for (name, map) in [("submanifold", &subm), ("down", &down), ("up", &up)] {
+        let c = [8, 16];
+        let x = random_values(&mut r, map.n_in() * c[0]);
+        let w = random_values(&mut r, map.volume() * c[0] * c[1]);
+        let g = random_values(&mut r, map.n_out() * c[1]);
+        let reference = run(map, &x, &w, &g, c, &devices[0].1);
+        for (device_name, device) in &devices[1..] {
+            let other = run(map, &x, &w, &g, c, device);
+            let what = format!("{name} on {device_name} vs flex");
+            assert_close(&other.out, &reference.out, 1e-5, &format!("{what}: output"));
+            assert_close(&other.gx, &reference.gx, 1e-5, &format!("{what}: feature gradient"));
+            assert_close(&other.gw, &reference.gw, 1e-5, &format!("{what}: weight gradient"));
+        }
+    }
+}

@@ -1,0 +1,187 @@
+//! Shared pieces of the op's tests: random sparse grids, tensors from values, and the dense
+//! reference computed with Burn's own `conv3d` / `conv_transpose3d` on a zero-filled grid.
+#![allow(dead_code)]
+
+use std::collections::{BTreeMap, HashSet};
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use sparse_conv::Coord;
+use sparse_conv::burn::tensor::module::{conv_transpose3d, conv3d};
+use sparse_conv::burn::tensor::ops::{ConvOptions, ConvTransposeOptions};
+use sparse_conv::burn::tensor::{DType, Device, Tensor, TensorData};
+
+pub fn rng(seed: u64) -> ChaCha8Rng {
+    ChaCha8Rng::seed_from_u64(seed)
+}
+
+/// `n` unique voxels in `batches` samples, multiples of `stride`, spread over `[-extent, extent)`
+/// voxels of that level (negative coordinates included).
+pub fn random_coords(rng: &mut ChaCha8Rng, n: usize, batches: i32, extent: i32, stride: i32) -> Vec<Coord> {
+    let mut seen = HashSet::new();
+    let mut out = Vec::new();
+    while out.len() < n {
+        let c = [
+            rng.random_range(0..batches),
+            rng.random_range(-extent..extent) * stride,
+            rng.random_range(-extent..extent) * stride,
+            rng.random_range(-extent..extent) * stride,
+        ];
+        if seen.insert(c) {
+            out.push(c);
+        }
+    }
+    out
+}
+
+pub fn random_values(rng: &mut ChaCha8Rng, n: usize) -> Vec<f64> {
+    (0..n).map(|_| rng.random_range(-1.0..1.0)).collect()
+}
+
+pub fn tensor2(values: &[f64], shape: [usize; 2], device: &Device, dtype: DType) -> Tensor<2> {
+    Tensor::from_data(TensorData::new(values.to_vec(), shape), (device, dtype))
+}
+
+pub fn tensor3(values: &[f64], shape: [usize; 3], device: &Device, dtype: DType) -> Tensor<3> {
+    Tensor::from_data(TensorData::new(values.to_vec(), shape), (device, dtype))
+}
+
+pub fn values<const D: usize>(t: Tensor<D>) -> Vec<f64> {
+    t.into_data().convert::<f64>().to_vec::<f64>().unwrap()
+}
+
+pub fn assert_close(actual: &[f64], expected: &[f64], tol: f64, what: &str) {
+    assert_eq!(actual.len(), expected.len(), "{what}: length");
+    let scale = expected.iter().fold(1.0f64, |m, v| m.max(v.abs()));
+    for (i, (a, e)) in actual.iter().zip(expected).enumerate() {
+        assert!((a - e).abs() <= tol * scale, "{what}: element {i}: {a} vs {e} (tol {tol}, scale {scale})");
+    }
+}
+
+/// Which convolution the dense reference computes.
+#[derive(Clone, Copy, Debug)]
+pub enum DenseKind {
+    /// Odd kernel, padding k/2: the submanifold result at active sites.
+    Submanifold(usize),
+    /// Kernel 2 stride 2 on a grid aligned to even cells.
+    Down,
+    /// Transposed kernel 2 stride 2, read at the fine voxels.
+    Up,
+}
+
+/// The dense reference, sample by sample, on a zero-filled grid in units of `stride`.
+///
+/// `coords` are the input voxels (multiples of `stride`); the result maps each output coordinate
+/// (finest-level units) to its features. For `Up`, `outputs` are the fine voxels to read.
+#[allow(clippy::too_many_arguments)]
+pub fn dense_reference(
+    kind: DenseKind,
+    coords: &[Coord],
+    x: &[f64],
+    c_in: usize,
+    weight: &[f64],
+    c_out: usize,
+    stride: i32,
+    outputs: &[Coord],
+    device: &Device,
+) -> BTreeMap<Coord, Vec<f64>> {
+    let k = match kind {
+        DenseKind::Submanifold(k) => k,
+        DenseKind::Down | DenseKind::Up => 2,
+    };
+    // Burn's conv3d weight is [C_out, C_in, kx, ky, kz]; conv_transpose3d's is [C_in, C_out, ...].
+    let w = Tensor::<1>::from_data(TensorData::new(weight.to_vec(), [weight.len()]), (device, DType::F64)).reshape([k, k, k, c_in, c_out]);
+    let mut result = BTreeMap::new();
+    let batches: Vec<i32> = coords.iter().map(|c| c[0]).collect::<std::collections::BTreeSet<_>>().into_iter().collect();
+    for b in batches {
+        let rows: Vec<usize> = (0..coords.len()).filter(|&r| coords[r][0] == b).collect();
+        let grid: Vec<[i32; 3]> = rows.iter().map(|&r| [coords[r][1] / stride, coords[r][2] / stride, coords[r][3] / stride]).collect();
+        // Origin on an even cell so that k2s2 cells line up with floor(c / 2)·2.
+        let lo: [i32; 3] = std::array::from_fn(|d| grid.iter().map(|g| g[d]).min().unwrap().div_euclid(2) * 2);
+        let hi: [i32; 3] = std::array::from_fn(|d| grid.iter().map(|g| g[d]).max().unwrap());
+        let dims: [usize; 3] = std::array::from_fn(|d| ((hi[d] - lo[d] + 2) / 2 * 2) as usize);
+        let mut dense = vec![0.0f64; c_in * dims[0] * dims[1] * dims[2]];
+        for (j, &r) in rows.iter().enumerate() {
+            let g = grid[j];
+            let p = [(g[0] - lo[0]) as usize, (g[1] - lo[1]) as usize, (g[2] - lo[2]) as usize];
+            for c in 0..c_in {
+                dense[((c * dims[0] + p[0]) * dims[1] + p[1]) * dims[2] + p[2]] = x[r * c_in + c];
+            }
+        }
+        let input = Tensor::<1>::from_data(TensorData::new(dense, [c_in * dims[0] * dims[1] * dims[2]]), (device, DType::F64))
+            .reshape([1, c_in, dims[0], dims[1], dims[2]]);
+        let (out, read): (Tensor<5>, Vec<(Coord, [usize; 3])>) = match kind {
+            DenseKind::Submanifold(k) => {
+                let pad = k / 2;
+                let out = conv3d(input, w.clone().permute([4, 3, 0, 1, 2]), None, ConvOptions::new([1, 1, 1], [pad, pad, pad], [1, 1, 1], 1));
+                let read = rows.iter().zip(&grid).map(|(&r, g)| (coords[r], std::array::from_fn(|d| (g[d] - lo[d]) as usize))).collect();
+                (out, read)
+            }
+            DenseKind::Down => {
+                let out = conv3d(input, w.clone().permute([4, 3, 0, 1, 2]), None, ConvOptions::new([2, 2, 2], [0, 0, 0], [1, 1, 1], 1));
+                let parents: std::collections::BTreeSet<[i32; 3]> = grid.iter().map(|g| g.map(|v| v.div_euclid(2) * 2)).collect();
+                let read = parents
+                    .into_iter()
+                    .map(|p| ([b, p[0] * stride, p[1] * stride, p[2] * stride], std::array::from_fn(|d| ((p[d] - lo[d]) / 2) as usize)))
+                    .collect();
+                (out, read)
+            }
+            DenseKind::Up => {
+                let out = conv_transpose3d(input, w.clone().permute([3, 4, 0, 1, 2]), None, ConvTransposeOptions::new([2, 2, 2], [0, 0, 0], [0, 0, 0], [1, 1, 1], 1));
+                // Fine voxels live at half this level's stride.
+                let fine = stride / 2;
+                let read = outputs
+                    .iter()
+                    .filter(|c| c[0] == b)
+                    .map(|c| (*c, std::array::from_fn(|d| (c[d + 1] / fine - 2 * lo[d]) as usize)))
+                    .collect();
+                (out, read)
+            }
+        };
+        let [_, _, ox, oy, oz] = out.dims();
+        let out = values(out);
+        for (coord, p) in read {
+            let f: Vec<f64> = (0..c_out).map(|c| out[((c * ox + p[0]) * oy + p[1]) * oz + p[2]]).collect();
+            result.insert(coord, f);
+        }
+    }
+    result
+}
+
+/// Rows of `features` (`rows × c`) keyed by their coordinates.
+pub fn by_coord(coords: &[Coord], features: &[f64], c: usize) -> BTreeMap<Coord, Vec<f64>> {
+    coords.iter().enumerate().map(|(r, &co)| (co, features[r * c..(r + 1) * c].to_vec())).collect()
+}
+
+pub fn assert_maps_close(actual: &BTreeMap<Coord, Vec<f64>>, expected: &BTreeMap<Coord, Vec<f64>>, tol: f64, what: &str) {
+    assert_eq!(actual.keys().collect::<Vec<_>>(), expected.keys().collect::<Vec<_>>(), "{what}: output coordinates");
+    for (c, e) in expected {
+        assert_close(&actual[c], e, tol, &format!("{what} at {c:?}"));
+    }
+}
+
+/// The wgpu device when an adapter runs the op; `None` (the test then skips, saying so) unless
+/// `PMUNET_REQUIRE_WGPU=1`, which CI sets after installing the software Vulkan driver.
+pub fn wgpu_device() -> Option<Device> {
+    use sparse_conv::burn::tensor::DeviceKind;
+    let required = std::env::var("PMUNET_REQUIRE_WGPU").is_ok_and(|v| v == "1");
+    let probe = std::panic::catch_unwind(|| {
+        let device = Device::wgpu(DeviceKind::DefaultDevice);
+        let coords = vec![[0, 0, 0, 0], [0, 1, 0, 0]];
+        let index = sparse_conv::CoordIndex::build(&coords).unwrap();
+        let map = std::sync::Arc::new(sparse_conv::KernelMap::submanifold(&coords, &index, 3, 1));
+        let x = Tensor::<2>::ones([2, 1], &device);
+        let w = Tensor::<3>::ones([27, 1, 1], &device);
+        let out = values(sparse_conv::sparse_conv(x, w, &map));
+        assert_eq!(out, vec![2.0, 2.0]);
+        device
+    });
+    match probe {
+        Ok(device) => Some(device),
+        Err(_) if required => panic!("PMUNET_REQUIRE_WGPU=1 but the sparse conv could not run on a wgpu adapter"),
+        Err(_) => {
+            eprintln!("skipping wgpu: no usable adapter (set PMUNET_REQUIRE_WGPU=1 to make this an error)");
+            None
+        }
+    }
+}

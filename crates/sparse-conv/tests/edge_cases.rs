@@ -1,0 +1,79 @@
+//! Empty input, one voxel, a voxel with no neighbours, and a level with a single parent.
+
+mod common;
+
+use std::sync::Arc;
+
+use common::*;
+use sparse_conv::burn::tensor::{DType, Device, Tensor};
+use sparse_conv::{CoordIndex, KernelMap, SparseTensor, sparse_conv};
+
+fn device() -> Device {
+    Device::flex()
+}
+
+#[test]
+fn empty_input_gives_empty_output_and_gradients() {
+    let dev = device().autodiff();
+    let coords: Vec<sparse_conv::Coord> = Vec::new();
+    let index = CoordIndex::build(&coords).unwrap();
+    let map = Arc::new(KernelMap::submanifold(&coords, &index, 3, 1));
+    let x = Tensor::<2>::zeros([0, 4], &dev).require_grad();
+    let w = Tensor::<3>::ones([27, 4, 2], &dev).require_grad();
+    let out = sparse_conv(x.clone(), w.clone(), &map);
+    assert_eq!(out.dims(), [0, 2]);
+    let grads = out.sum().backward();
+    assert_eq!(values(w.grad(&grads).unwrap()), vec![0.0; 27 * 8]);
+    let (down, coarse) = KernelMap::down(&coords, 2, 1).unwrap();
+    assert_eq!((down.n_out(), coarse.len()), (0, 0));
+}
+
+#[test]
+fn isolated_voxels_see_only_the_centre_weight() {
+    let dev = device();
+    // One voxel alone, and a voxel two cells away from any other (no 3×3×3 neighbours).
+    for coords in [vec![[0, 3, -4, 5]], vec![[0, 0, 0, 0], [0, 2, 0, 0], [1, 0, 0, 0]]] {
+        let n = coords.len();
+        let mut r = rng(41);
+        let x = random_values(&mut r, n * 3);
+        let w = random_values(&mut r, 27 * 3 * 2);
+        let index = CoordIndex::build(&coords).unwrap();
+        let map = Arc::new(KernelMap::submanifold(&coords, &index, 3, 1));
+        assert_eq!(map.num_pairs(), n);
+        let out = values(sparse_conv(tensor2(&x, [n, 3], &dev, DType::F64), tensor3(&w, [27, 3, 2], &dev, DType::F64), &map));
+        for row in 0..n {
+            for co in 0..2 {
+                let expected: f64 = (0..3).map(|ci| x[row * 3 + ci] * w[(13 * 3 + ci) * 2 + co]).sum();
+                assert!((out[row * 2 + co] - expected).abs() < 1e-12);
+            }
+        }
+    }
+}
+
+#[test]
+fn a_level_with_a_single_parent() {
+    let dev = device();
+    // All eight children of the cell at the origin.
+    let coords: Vec<_> = (0..8).map(|k| [0, (k >> 2) & 1, (k >> 1) & 1, k & 1]).collect();
+    let (down, coarse) = KernelMap::down(&coords, 2, 1).unwrap();
+    assert_eq!(coarse, vec![[0, 0, 0, 0]]);
+    let x: Vec<f64> = (0..8).map(|i| i as f64 + 1.0).collect();
+    let w: Vec<f64> = (0..8).map(|k| 10f64.powi(k)).collect();
+    let down = Arc::new(down);
+    let y = values(sparse_conv(tensor2(&x, [8, 1], &dev, DType::F64), tensor3(&w, [8, 1, 1], &dev, DType::F64), &down));
+    // Child k (offset k) meets weight k: Σ (k+1)·10^k.
+    let expected: f64 = (0..8).map(|k| (k as f64 + 1.0) * 10f64.powi(k)).sum();
+    assert_eq!(y, vec![expected]);
+    let up = Arc::new(down.transposed());
+    let z = values(sparse_conv(tensor2(&[2.0], [1, 1], &dev, DType::F64), tensor3(&w, [8, 1, 1], &dev, DType::F64), &up));
+    assert_eq!(z, w.iter().map(|v| 2.0 * v).collect::<Vec<_>>());
+}
+
+#[test]
+fn sparse_tensor_rejects_bad_coordinates() {
+    let dev = device();
+    let err = SparseTensor::new(Tensor::zeros([2, 1], &dev), vec![[0, 1, 1, 1], [0, 1, 1, 1]]).unwrap_err();
+    assert!(err.to_string().contains("appears twice"), "{err}");
+    let err = SparseTensor::new(Tensor::zeros([3, 1], &dev), vec![[0, 1, 1, 1]]).unwrap_err();
+    assert!(err.to_string().contains("3 feature rows for 1"), "{err}");
+}
