@@ -1,0 +1,139 @@
+//! From a `Frame` to a `Sample` (augment → voxelize → cap) and from samples to a `Batch`.
+
+use rand::Rng;
+
+use crate::augment::{AugmentConfig, Augmentation};
+use crate::box3d::Box3d;
+use crate::dataset::Frame;
+use crate::voxelize::{VoxelConfig, Voxels, voxel_centre, voxelize};
+
+/// How one frame becomes a sample.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
+pub struct SampleConfig {
+    /// Voxel size and pooling.
+    pub voxel: VoxelConfig,
+    /// Augmentation, `None` at evaluation.
+    pub augment: Option<AugmentConfig>,
+    /// Voxel cap (30,000 in training), `None` at evaluation.
+    pub max_voxels: Option<usize>,
+}
+
+impl Default for SampleConfig {
+    /// The training settings of the paper.
+    fn default() -> Self {
+        Self { voxel: VoxelConfig::default(), augment: Some(AugmentConfig::default()), max_voxels: Some(30_000) }
+    }
+}
+
+impl SampleConfig {
+    /// Evaluation settings: no augmentation, no cap.
+    pub fn eval() -> Self {
+        Self { voxel: VoxelConfig::default(), augment: None, max_voxels: None }
+    }
+}
+
+/// One frame, voxelized, with its (augmented) boxes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Sample {
+    /// Sequence name.
+    pub sequence: String,
+    /// Frame name (`000123`).
+    pub name: String,
+    /// The voxels.
+    pub voxels: Voxels,
+    /// Boxes, transformed like the points.
+    pub boxes: Vec<Box3d>,
+    /// `num_points` of each box (evaluation filters on it).
+    pub num_points: Vec<i64>,
+    /// Points in the frame before voxelization.
+    pub n_points: usize,
+    /// The transform applied, if any.
+    pub augmentation: Option<Augmentation>,
+}
+
+/// Augments, voxelizes and caps one frame.
+pub fn prepare<R: Rng + ?Sized>(mut frame: Frame, cfg: &SampleConfig, rng: &mut R) -> Sample {
+    let augmentation = cfg.augment.map(|a| {
+        let t = Augmentation::sample(&a, rng);
+        t.apply_points(&mut frame.points);
+        frame.boxes = frame.boxes.iter().map(|b| t.apply_box(b)).collect();
+        t
+    });
+    let mut voxels = voxelize(&frame.points, &cfg.voxel);
+    if let Some(max) = cfg.max_voxels {
+        voxels = voxels.subsample(max, rng);
+    }
+    Sample {
+        sequence: frame.sequence,
+        name: frame.name,
+        voxels,
+        boxes: frame.boxes,
+        num_points: frame.num_points,
+        n_points: frame.points.len(),
+        augmentation,
+    }
+}
+
+/// A batch as plain arrays, ready to become tensors.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Batch {
+    /// Voxel coordinates `(b, x, y, z)`, M rows, sample by sample.
+    pub coords: Vec<[i32; 4]>,
+    /// Features, M×3 row-major (raw xyz in metres).
+    pub features: Vec<f32>,
+    /// Voxel centres in metres, M×3 row-major (the regression reference).
+    pub centres: Vec<f32>,
+    /// Sample b owns rows `offsets[b]..offsets[b + 1]`; `offsets.len() == batch size + 1`.
+    pub offsets: Vec<usize>,
+    /// Boxes of each sample.
+    pub boxes: Vec<Vec<Box3d>>,
+    /// `num_points` of each box of each sample.
+    pub num_points: Vec<Vec<i64>>,
+    /// `(sequence, frame name)` of each sample.
+    pub frames: Vec<(String, String)>,
+    /// Voxel size used, metres.
+    pub voxel_size: [f32; 3],
+}
+
+impl Batch {
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.frames.len()
+    }
+
+    /// Whether it has no samples.
+    pub fn is_empty(&self) -> bool {
+        self.frames.is_empty()
+    }
+
+    /// Total voxels M.
+    pub fn num_voxels(&self) -> usize {
+        self.coords.len()
+    }
+}
+
+/// Stacks samples into one batch; the batch index is each sample's position.
+pub fn collate(samples: Vec<Sample>, voxel_size: [f32; 3]) -> Batch {
+    let m: usize = samples.iter().map(|s| s.voxels.len()).sum();
+    let mut b = Batch {
+        coords: Vec::with_capacity(m),
+        features: Vec::with_capacity(3 * m),
+        centres: Vec::with_capacity(3 * m),
+        offsets: vec![0],
+        voxel_size,
+        ..Default::default()
+    };
+    for (i, s) in samples.into_iter().enumerate() {
+        for (c, f) in s.voxels.coords.iter().zip(&s.voxels.features) {
+            b.coords.push([i as i32, c[0], c[1], c[2]]);
+            b.features.extend_from_slice(f);
+            b.centres.extend_from_slice(&voxel_centre(*c, voxel_size));
+        }
+        b.offsets.push(b.coords.len());
+        b.boxes.push(s.boxes);
+        b.num_points.push(s.num_points);
+        b.frames.push((s.sequence, s.name));
+    }
+    b
+}

@@ -1,0 +1,56 @@
+//! JRDB data: the box type of the workspace, readers for the JRDB layout, batching, and a
+//! simulator that writes JRDB-format trees.
+//!
+//! Crate map:
+//! - files: [`pcd`] (+ [`lzf`]), [`labels`], [`calibration`], [`timestamps`], [`split`] (layout and
+//!   splits), [`dataset`] (`JrdbDataset`, `Frame`);
+//! - batches: [`augment`] → [`voxelize`] → [`batch`] (`Sample`, `Batch`), driven by [`loader`];
+//! - checks: [`stats`], [`convention`];
+//! - the built-in data: [`sim`] (`synth`).
+#![warn(missing_docs)]
+
+/// Training augmentation (scale, rotation about z).
+pub mod augment;
+/// Frames to samples to batches.
+pub mod batch;
+/// The workspace's box type and its convention.
+pub mod box3d;
+/// LiDAR → base-frame transforms of `defaults.yaml`.
+pub mod calibration;
+/// The box-convention check against `num_points`.
+pub mod convention;
+/// A split of a JRDB tree and its frames.
+pub mod dataset;
+/// Errors that name the file at fault.
+pub mod error;
+/// `labels_3d` JSON.
+pub mod labels;
+/// Seeded, shuffling, prefetching batch loader.
+pub mod loader;
+/// LZF block compression (PCD `binary_compressed`).
+pub mod lzf;
+/// PCD reader and writer.
+pub mod pcd;
+/// The JRDB-format simulator.
+#[allow(missing_docs)]
+pub mod sim;
+/// Layout of a tree and its splits.
+pub mod split;
+/// Dataset statistics.
+pub mod stats;
+/// `frames_pc.json`.
+pub mod timestamps;
+/// Voxelization.
+pub mod voxelize;
+
+pub use augment::{AugmentConfig, Augmentation};
+pub use batch::{Batch, Sample, SampleConfig, collate, prepare};
+pub use box3d::Box3d;
+pub use calibration::{Calibration, Lidar};
+pub use dataset::{DatasetConfig, Frame, JrdbDataset, OnBadFrame};
+pub use error::{DataError, ErrorKind, Result};
+pub use labels::Label;
+pub use loader::{Batches, Loader, LoaderConfig};
+pub use pcd::{Encoding, NonFinite, PointCloud, read_pcd};
+pub use split::{DEFAULT_VAL_SEQUENCES, Layout, Split};
+pub use voxelize::{Pooling, VoxelConfig, Voxels, voxelize};

@@ -1,0 +1,158 @@
+//! `synth`: simulates sequences and writes them as a complete JRDB-format tree.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
+
+use super::lidar::Vlp16;
+use super::scene::{Scene, SceneKind};
+use crate::calibration::{Calibration, Lidar};
+use crate::error::{DataError, Result};
+use crate::labels::{Label, write_labels};
+use crate::pcd::{Column, Encoding, FieldType, write_pcd};
+use crate::split::{DEFAULT_TRAIN_SEQUENCES, DEFAULT_VAL_SEQUENCES, Layout};
+use crate::timestamps::{FrameTime, write_timestamps};
+
+/// What to simulate.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SynthConfig {
+    /// Number of sequences.
+    pub sequences: usize,
+    /// Frames per sequence.
+    pub frames: usize,
+    /// Seed; the same seed writes the same tree.
+    pub seed: u64,
+    /// Most people in one scene (0–40 as in JRDB).
+    pub max_people: usize,
+    /// Frames per second (JRDB's annotated rate is 15).
+    pub fps: f64,
+    /// PCD encoding of the clouds.
+    pub encoding: Encoding,
+    /// People farther than this (BEV, metres) are not labelled.
+    pub label_range: f64,
+}
+
+impl Default for SynthConfig {
+    fn default() -> Self {
+        Self { sequences: 2, frames: 10, seed: 0, max_people: 40, fps: 15.0, encoding: Encoding::Binary, label_range: 35.0 }
+    }
+}
+
+/// What `synth` wrote.
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
+pub struct SynthSummary {
+    pub sequences: Vec<String>,
+    pub frames: usize,
+    pub points: usize,
+    pub boxes: usize,
+}
+
+/// JRDB sequence names for simulated sequences: train names with every fourth (from the second)
+/// a validation name, so the default split has train and val sequences as soon as there are two.
+pub fn sequence_names(n: usize) -> Vec<String> {
+    let (mut t, mut v) = (DEFAULT_TRAIN_SEQUENCES.iter(), DEFAULT_VAL_SEQUENCES.iter());
+    (0..n)
+        .map(|i| {
+            let pick = if i % 4 == 1 { v.next().or_else(|| t.next()) } else { t.next().or_else(|| v.next()) };
+            pick.map_or_else(|| format!("sim-extra-{i:03}_0"), |s| s.to_string())
+        })
+        .collect()
+}
+
+fn mix(a: u64, b: u64) -> u64 {
+    let mut z = a ^ b.wrapping_mul(0x9E37_79B9_7F4A_7C15).wrapping_add(0x632B_E59B_D9B4_E019);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+fn mkdir(p: &Path) -> Result<()> {
+    std::fs::create_dir_all(p).map_err(|e| DataError::io(p, e))
+}
+
+/// Writes a simulated JRDB-format tree under `out` (a plain root: `out/pointclouds/...`).
+pub fn synth(out: &Path, cfg: &SynthConfig) -> Result<SynthSummary> {
+    let layout = Layout { root: out.to_path_buf() };
+    let calib = Calibration::default();
+    mkdir(&out.join("calibration"))?;
+    calib.write(&layout.calibration_file())?;
+    mkdir(&out.join("labels").join("labels_3d"))?;
+    let names = sequence_names(cfg.sequences);
+    let mut summary = SynthSummary { sequences: names.clone(), ..Default::default() };
+    // Sequences one after another; the rays of each scan run in parallel.
+    for (si, seq) in names.iter().enumerate() {
+        let (f, p, b) = synth_sequence(&layout, seq, si as u64, cfg, &calib)?;
+        summary.frames += f;
+        summary.points += p;
+        summary.boxes += b;
+    }
+    Ok(summary)
+}
+
+fn synth_sequence(layout: &Layout, seq: &str, index: u64, cfg: &SynthConfig, calib: &Calibration) -> Result<(usize, usize, usize)> {
+    for l in Lidar::BOTH {
+        mkdir(&layout.cloud_dir(l, seq))?;
+    }
+    mkdir(layout.timestamps_file(seq).parent().unwrap())?;
+    let seq_seed = mix(cfg.seed, index);
+    let mut rng = ChaCha8Rng::seed_from_u64(seq_seed);
+    let mut scene = Scene::generate(SceneKind::for_sequence(seq), cfg.max_people, &mut rng);
+    let lidar = Vlp16::default();
+    let dt = 1.0 / cfg.fps;
+    let t0 = 1_550_000_000.0 + index as f64 * 10_000.0;
+    let mut labels = BTreeMap::new();
+    let mut times = Vec::new();
+    let (mut n_points, mut n_boxes) = (0, 0);
+    for fi in 0..cfg.frames {
+        if fi > 0 {
+            scene.step(dt, &mut rng);
+        }
+        let (people, views) = scene.people_now();
+        let prims: Vec<_> = scene.statics.iter().copied().chain(people).collect();
+        let name = format!("{fi:06}");
+        // Base-frame points exactly as the reader will compute them from the written f32 values.
+        let mut base_points: Vec<[f32; 3]> = Vec::new();
+        let clouds: Vec<_> = Lidar::BOTH
+            .par_iter()
+            .map(|&l| {
+                let t = calib.lidar(l);
+                let origin = scene.to_world(t.origin());
+                let scan_seed = mix(seq_seed, (fi as u64) * 2 + l as u64 + 1);
+                (l, lidar.scan(&prims, origin, scene.robot[2] + t.yaw, scan_seed))
+            })
+            .collect();
+        for (l, rets) in clouds {
+            let t = calib.lidar(l);
+            let xyz: Vec<[f32; 3]> = rets.iter().map(|r| [r.xyz[0] as f32, r.xyz[1] as f32, r.xyz[2] as f32]).collect();
+            base_points.extend(xyz.iter().map(|&p| t.to_base(p)));
+            let col = |name: &str, ty, values: Vec<f64>| Column { name: name.into(), ty, values };
+            let cols = [
+                col("x", FieldType::F32, xyz.iter().map(|p| p[0] as f64).collect()),
+                col("y", FieldType::F32, xyz.iter().map(|p| p[1] as f64).collect()),
+                col("z", FieldType::F32, xyz.iter().map(|p| p[2] as f64).collect()),
+                col("intensity", FieldType::F32, rets.iter().map(|r| r.intensity as f64).collect()),
+                col("ring", FieldType::U16, rets.iter().map(|r| r.ring as f64).collect()),
+            ];
+            write_pcd(&layout.cloud_dir(l, seq).join(format!("{name}.pcd")), &cols, cfg.encoding)?;
+        }
+        n_points += base_points.len();
+        let mut frame_labels = Vec::new();
+        for v in &views {
+            let b = scene.box_to_base(&v.bbox);
+            if b.bev_range() > cfg.label_range {
+                continue;
+            }
+            let np = b.count_inside(&base_points) as i64;
+            frame_labels.push(Label { id: format!("pedestrian:{}", v.id), bbox: b, num_points: np });
+        }
+        n_boxes += frame_labels.len();
+        labels.insert(format!("{name}.pcd"), frame_labels);
+        times.push(FrameTime { frame_id: fi as u64, timestamp: t0 + fi as f64 * dt });
+    }
+    write_labels(&layout.labels_file(seq), &labels)?;
+    write_timestamps(&layout.timestamps_file(seq), seq, &times)?;
+    Ok((cfg.frames, n_points, n_boxes))
+}
