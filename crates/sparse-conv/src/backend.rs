@@ -7,6 +7,7 @@
 // burn-ndarray is deprecated in Burn 0.22 but is one of the CPU backends pmunet supports.
 #![allow(deprecated)]
 
+use std::borrow::Cow;
 use std::sync::Arc;
 
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
@@ -14,10 +15,11 @@ use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
 use burn::backend::autodiff::grads::Gradients;
 use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
 use burn::backend::tensor::{FloatTensor, IndexingUpdateOp, IntTensor};
+use burn::backend::ndarray::NdArrayTensor;
 use burn::backend::{Autodiff, Backend, Cube, Flex, NdArray, TensorMetadata, backend_extension};
 use burn::tensor::{DType, Shape, TensorData};
 
-use crate::cpu::{self, Element, WeightUse};
+use crate::cpu::{self, PairDirection};
 use crate::kernel_map::KernelMap;
 
 /// A backend that can run the sparse convolution of a [`KernelMap`].
@@ -98,54 +100,88 @@ fn weight_slice<B: Backend>(weight: FloatTensor<B>, k: usize, device: &burn::bac
     B::float_reshape(B::float_select(weight, 0, index), Shape::new([shape[1], shape[2]]))
 }
 
-/// Reads a CPU tensor's values, runs `f` on them as f32 or f64, and makes a tensor of the result.
-fn on_cpu<B: Backend>(
-    inputs: [FloatTensor<B>; 2],
+/// Read access to a CPU backend's float values, without a copy when the tensor is contiguous
+/// (reading through `into_data` copies every tensor autodiff also holds, element by element on
+/// ndarray).
+trait HostFloats: Backend {
+    fn host_f32(t: &FloatTensor<Self>) -> Cow<'_, [f32]>;
+    fn host_f64(t: &FloatTensor<Self>) -> Cow<'_, [f64]>;
+}
+
+impl HostFloats for Flex {
+    fn host_f32(t: &FloatTensor<Self>) -> Cow<'_, [f32]> {
+        t.as_slice::<f32>().map_or_else(|| Cow::Owned(t.to_contiguous().storage::<f32>().to_vec()), Cow::Borrowed)
+    }
+    fn host_f64(t: &FloatTensor<Self>) -> Cow<'_, [f64]> {
+        t.as_slice::<f64>().map_or_else(|| Cow::Owned(t.to_contiguous().storage::<f64>().to_vec()), Cow::Borrowed)
+    }
+}
+
+impl HostFloats for NdArray {
+    fn host_f32(t: &FloatTensor<Self>) -> Cow<'_, [f32]> {
+        match t {
+            NdArrayTensor::F32(s) => match s.view().to_slice() {
+                Some(v) => Cow::Borrowed(v),
+                None => Cow::Owned(s.view().iter().copied().collect()),
+            },
+            other => panic!("expected an f32 tensor, got {:?}", other.dtype()),
+        }
+    }
+    fn host_f64(t: &FloatTensor<Self>) -> Cow<'_, [f64]> {
+        match t {
+            NdArrayTensor::F64(s) => match s.view().to_slice() {
+                Some(v) => Cow::Borrowed(v),
+                None => Cow::Owned(s.view().iter().copied().collect()),
+            },
+            other => panic!("expected an f64 tensor, got {:?}", other.dtype()),
+        }
+    }
+}
+
+/// Runs `f32`/`f64` on the values of two CPU tensors of one dtype and wraps the result.
+fn on_cpu<B: HostFloats>(
+    inputs: [&FloatTensor<B>; 2],
     out_shape: [usize; 2],
     run_f32: impl FnOnce(&[f32], &[f32]) -> Vec<f32>,
     run_f64: impl FnOnce(&[f64], &[f64]) -> Vec<f64>,
 ) -> FloatTensor<B> {
-    let device = inputs[0].device();
-    let [a, b] = inputs.map(|t| burn::tensor::read_sync(B::float_into_data(t)).expect("reading a CPU tensor cannot fail"));
+    let [a, b] = inputs;
+    let device = a.device();
     assert_eq!(a.dtype(), b.dtype(), "sparse conv inputs must share a dtype, got {:?} and {:?}", a.dtype(), b.dtype());
     let data = match a.dtype() {
-        DType::F32 => TensorData::new(run_f32(slice::<f32>(&a), slice::<f32>(&b)), out_shape),
-        DType::F64 => TensorData::new(run_f64(slice::<f64>(&a), slice::<f64>(&b)), out_shape),
+        DType::F32 => TensorData::new(run_f32(&B::host_f32(a), &B::host_f32(b)), out_shape),
+        DType::F64 => TensorData::new(run_f64(&B::host_f64(a), &B::host_f64(b)), out_shape),
         other => panic!("sparse conv runs on f32 and f64 tensors, got {other:?}"),
     };
     B::float_from_data(data, &device)
 }
 
-fn slice<T: Element + burn::backend::Element>(data: &TensorData) -> &[T] {
-    data.as_slice::<T>().expect("dtype checked above")
-}
-
-fn cpu_forward<B: Backend>(features: FloatTensor<B>, weight: FloatTensor<B>, map: &KernelMap) -> FloatTensor<B> {
+fn cpu_forward<B: HostFloats>(features: FloatTensor<B>, weight: FloatTensor<B>, map: &KernelMap) -> FloatTensor<B> {
     let (c_in, c_out) = (weight.shape()[1], weight.shape()[2]);
     check_shapes(&features.shape(), &weight.shape(), map.n_in(), map.volume());
     on_cpu::<B>(
-        [features, weight],
+        [&features, &weight],
         [map.n_out(), c_out],
-        |x, w| cpu::gather_conv(x, c_in, w, c_out, WeightUse::Direct, map.out_table()),
-        |x, w| cpu::gather_conv(x, c_in, w, c_out, WeightUse::Direct, map.out_table()),
+        |x, w| cpu::pair_conv(x, c_in, w, c_out, map.n_out(), PairDirection::Forward, map.pairs(), map.identity_offset()),
+        |x, w| cpu::pair_conv(x, c_in, w, c_out, map.n_out(), PairDirection::Forward, map.pairs(), map.identity_offset()),
     )
 }
 
-fn cpu_input_grad<B: Backend>(grad_out: FloatTensor<B>, weight: FloatTensor<B>, map: &KernelMap) -> FloatTensor<B> {
+fn cpu_input_grad<B: HostFloats>(grad_out: FloatTensor<B>, weight: FloatTensor<B>, map: &KernelMap) -> FloatTensor<B> {
     let (c_in, c_out) = (weight.shape()[1], weight.shape()[2]);
     on_cpu::<B>(
-        [grad_out, weight],
+        [&grad_out, &weight],
         [map.n_in(), c_in],
-        |g, w| cpu::gather_conv(g, c_out, w, c_in, WeightUse::Transposed, map.in_table()),
-        |g, w| cpu::gather_conv(g, c_out, w, c_in, WeightUse::Transposed, map.in_table()),
+        |g, w| cpu::pair_conv(g, c_out, w, c_in, map.n_in(), PairDirection::Backward, map.pairs(), map.identity_offset()),
+        |g, w| cpu::pair_conv(g, c_out, w, c_in, map.n_in(), PairDirection::Backward, map.pairs(), map.identity_offset()),
     )
 }
 
-fn cpu_weight_grad<B: Backend>(features: FloatTensor<B>, grad_out: FloatTensor<B>, map: &KernelMap) -> FloatTensor<B> {
+fn cpu_weight_grad<B: HostFloats>(features: FloatTensor<B>, grad_out: FloatTensor<B>, map: &KernelMap) -> FloatTensor<B> {
     let (c_in, c_out) = (features.shape()[1], grad_out.shape()[1]);
     let pairs = map.pairs();
     let out = on_cpu::<B>(
-        [features, grad_out],
+        [&features, &grad_out],
         [map.volume(), c_in * c_out],
         |x, g| cpu::weight_grad(x, c_in, g, c_out, pairs),
         |x, g| cpu::weight_grad(x, c_in, g, c_out, pairs),

@@ -1,16 +1,14 @@
 //! The sparse convolution written once, over plain slices: forward, feature gradient, weight
 //! gradient. Every CPU backend calls these; the GPU path computes the same sums.
 //!
-//! Determinism: work is split into tiles whose size depends only on the problem, never on the
-//! number of threads, and every sum is taken in a fixed order, so results are bit-identical at any
-//! thread count (no atomics, no scatter into rows another task owns).
+//! Determinism: every output row sums its offsets in one fixed order, and the weight gradient's
+//! partial sums are cut at sizes that depend only on the problem, never on the number of threads,
+//! so results are bit-identical at any thread count (no atomics, no two tasks writing one row).
 
 use rayon::prelude::*;
 
-use crate::kernel_map::{NONE, NeighborTable, OffsetPairs};
+use crate::kernel_map::OffsetPairs;
 
-/// Output rows per task of the gather-GEMM kernel.
-const TILE_ROWS: usize = 256;
 /// Pairs per partial sum of the weight gradient.
 const GRAD_CHUNK: usize = 2048;
 
@@ -55,81 +53,6 @@ impl Element for f64 {
     }
     const ZERO: f64 = 0.0;
     const ONE: f64 = 1.0;
-}
-
-/// How a gather reads the weight `[K, C_in, C_out]`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum WeightUse {
-    /// `W_k` as stored: the forward.
-    Direct,
-    /// `W_kᵀ`: the feature gradient, gathered over the transposed map.
-    Transposed,
-}
-
-/// `out[o] = Σ_k x[table[o, k]] · W_k` for every output row of `table`.
-///
-/// `x` is `rows_in × c_in`; `weight` is `[K, C_in, C_out]` (read as `W_kᵀ` with
-/// [`WeightUse::Transposed`], in which case `c_in` = C_out and the result has C_in columns).
-pub fn gather_conv<T: Element>(
-    x: &[T],
-    c_in: usize,
-    weight: &[T],
-    c_out: usize,
-    weight_use: WeightUse,
-    table: &NeighborTable,
-) -> Vec<T> {
-    let volume = table.volume();
-    let n_out = table.rows();
-    assert_eq!(weight.len(), volume * c_in * c_out, "weight does not match the map and channels");
-    let mut out = vec![T::ZERO; n_out * c_out];
-    if n_out == 0 || c_out == 0 {
-        return out;
-    }
-    let (rsb, csb) = match weight_use {
-        WeightUse::Direct => (c_out as isize, 1),
-        WeightUse::Transposed => (1, c_in as isize),
-    };
-    out.par_chunks_mut(TILE_ROWS * c_out).enumerate().for_each_init(
-        || (vec![T::ZERO; TILE_ROWS * c_in], vec![T::ZERO; TILE_ROWS * c_out], vec![0usize; TILE_ROWS]),
-        |(gathered, product, rows), (tile, out_tile)| {
-            let first = tile * TILE_ROWS;
-            let len = out_tile.len() / c_out;
-            for k in 0..volume {
-                let mut m = 0;
-                for r in 0..len {
-                    let i = table.row(first + r)[k];
-                    if i != NONE {
-                        let i = i as usize;
-                        gathered[m * c_in..(m + 1) * c_in].copy_from_slice(&x[i * c_in..(i + 1) * c_in]);
-                        rows[m] = r;
-                        m += 1;
-                    }
-                }
-                if m == 0 {
-                    continue;
-                }
-                let w = weight[k * c_in * c_out..].as_ptr();
-                if m == len {
-                    // Every row of the tile has a partner here (always true at the centre offset):
-                    // accumulate straight into the tile.
-                    unsafe {
-                        T::gemm(m, c_in, c_out, gathered.as_ptr(), c_in as isize, 1, w, rsb, csb, T::ONE, out_tile.as_mut_ptr(), c_out as isize, 1);
-                    }
-                } else {
-                    unsafe {
-                        T::gemm(m, c_in, c_out, gathered.as_ptr(), c_in as isize, 1, w, rsb, csb, T::ZERO, product.as_mut_ptr(), c_out as isize, 1);
-                    }
-                    for (j, &r) in rows[..m].iter().enumerate() {
-                        let dst = &mut out_tile[r * c_out..(r + 1) * c_out];
-                        for (d, &p) in dst.iter_mut().zip(&product[j * c_out..(j + 1) * c_out]) {
-                            *d += p;
-                        }
-                    }
-                }
-            }
-        },
-    );
-    out
 }
 
 /// `dW_k = Σ_{(i, o) ∈ M_k} x[i]ᵀ · g[o]`, as `[K, C_in, C_out]`.

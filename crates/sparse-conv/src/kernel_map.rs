@@ -121,6 +121,11 @@ impl KernelMap {
         &self.in_table
     }
 
+    /// The offset whose pairs are `(r, r)` for every row (the submanifold centre), if any.
+    pub fn identity_offset(&self) -> Option<usize> {
+        matches!(self.kind, MapKind::Submanifold { .. }).then_some(self.volume() / 2)
+    }
+
     /// Number of (input, output) pairs over all offsets.
     pub fn num_pairs(&self) -> usize {
         self.out_table.data.iter().filter(|&&i| i != NONE).count()
