@@ -183,8 +183,8 @@ fn cpu_weight_grad<B: HostFloats>(features: FloatTensor<B>, grad_out: FloatTenso
     let out = on_cpu::<B>(
         [&features, &grad_out],
         [map.volume(), c_in * c_out],
-        |x, g| cpu::weight_grad(x, c_in, g, c_out, pairs),
-        |x, g| cpu::weight_grad(x, c_in, g, c_out, pairs),
+        |x, g| cpu::weight_grad(x, c_in, g, c_out, pairs, map.identity_offset()),
+        |x, g| cpu::weight_grad(x, c_in, g, c_out, pairs, map.identity_offset()),
     );
     B::float_reshape(out, Shape::new([map.volume(), c_in, c_out]))
 }

@@ -57,8 +57,16 @@ impl Element for f64 {
 
 /// `dW_k = Σ_{(i, o) ∈ M_k} x[i]ᵀ · g[o]`, as `[K, C_in, C_out]`.
 ///
-/// Each offset's pairs are cut into fixed chunks whose partial products are summed in chunk order.
-pub fn weight_grad<T: Element>(x: &[T], c_in: usize, grad_out: &[T], c_out: usize, pairs: &OffsetPairs) -> Vec<T> {
+/// Each offset's pairs are cut into fixed chunks whose partial products are summed in chunk order;
+/// the `identity` offset (pairs `(r, r)` in row order) reads its rows without a gather.
+pub fn weight_grad<T: Element>(
+    x: &[T],
+    c_in: usize,
+    grad_out: &[T],
+    c_out: usize,
+    pairs: &OffsetPairs,
+    identity: Option<usize>,
+) -> Vec<T> {
     let volume = pairs.start.len() - 1;
     let block = c_in * c_out;
     let mut chunks = Vec::new();
@@ -75,8 +83,16 @@ pub fn weight_grad<T: Element>(x: &[T], c_in: usize, grad_out: &[T], c_out: usiz
     if block > 0 {
         partials.par_chunks_mut(block).zip(chunks.par_iter()).for_each_init(
             || (vec![T::ZERO; GRAD_CHUNK * c_in], vec![T::ZERO; GRAD_CHUNK * c_out]),
-            |(xs, gs), (partial, &(_, a, b))| {
+            |(xs, gs), (partial, &(k, a, b))| {
                 let m = b - a;
+                if Some(k) == identity {
+                    // The centre pairs are (r, r) for r = 0.. in order: read the rows in place.
+                    let r = a - pairs.start[k];
+                    unsafe {
+                        T::gemm(c_in, m, c_out, x[r * c_in..].as_ptr(), 1, c_in as isize, grad_out[r * c_out..].as_ptr(), c_out as isize, 1, T::ZERO, partial.as_mut_ptr(), c_out as isize, 1);
+                    }
+                    return;
+                }
                 for (j, p) in (a..b).enumerate() {
                     let i = pairs.input[p] as usize;
                     let o = pairs.output[p] as usize;

@@ -134,20 +134,30 @@ impl KernelMap {
     /// The pairs grouped by offset, ordered by output row within an offset; built on first use.
     pub fn pairs(&self) -> &OffsetPairs {
         self.pairs.get_or_init(|| {
+            // Two row-major passes (count, then fill) instead of one strided pass per offset.
             let table = &*self.out_table;
-            let mut start = Vec::with_capacity(table.volume + 1);
-            let (mut input, mut output) = (Vec::new(), Vec::new());
-            for k in 0..table.volume {
-                start.push(input.len());
-                for o in 0..table.rows {
-                    let i = table.data[o * table.volume + k];
+            let volume = table.volume;
+            let mut start = vec![0usize; volume + 1];
+            for row in table.data.chunks_exact(volume) {
+                for (k, &i) in row.iter().enumerate() {
+                    start[k + 1] += (i != NONE) as usize;
+                }
+            }
+            for k in 0..volume {
+                start[k + 1] += start[k];
+            }
+            let total = start[volume];
+            let (mut input, mut output) = (vec![0u32; total], vec![0u32; total]);
+            let mut next = start[..volume].to_vec();
+            for (o, row) in table.data.chunks_exact(volume).enumerate() {
+                for (k, &i) in row.iter().enumerate() {
                     if i != NONE {
-                        input.push(i);
-                        output.push(o as u32);
+                        input[next[k]] = i;
+                        output[next[k]] = o as u32;
+                        next[k] += 1;
                     }
                 }
             }
-            start.push(input.len());
             OffsetPairs { start, input, output }
         })
     }

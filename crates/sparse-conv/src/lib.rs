@@ -9,6 +9,7 @@
 //! - [`tensor`]: [`SparseTensor`], features with coordinates and a shared map cache.
 //! - [`modules`]: convolutions, batch norm, linear and U-Net blocks.
 //! - [`scene`]: voxel scenes for benchmarks (a synthetic LiDAR-like scene, `.npy` files).
+//! - [`timing`]: medians and peak memory for the benchmark binaries.
 
 pub mod backend;
 pub mod coords;
@@ -18,6 +19,7 @@ pub mod modules;
 pub mod op;
 pub mod scene;
 pub mod tensor;
+pub mod timing;
 
 pub use backend::SparseConvBackend;
 pub use coords::{Coord, CoordError, CoordIndex};
