@@ -1,0 +1,135 @@
+//! What the `model-bench` binary measures: an inference forward pass and one training step
+//! (forward, loss, backward, Adam) of either detector on a voxel scene, medians after a warm-up,
+//! and the peak resident memory (Linux `VmHWM`).
+
+
+use data_jrdb::Batch;
+use serde::Serialize;
+use sparse_conv::burn::module::Module;
+use sparse_conv::burn::optim::{AdamConfig, GradientsParams};
+use sparse_conv::burn::tensor::Device;
+use sparse_conv::{Coord, scene};
+
+use crate::config::ModelConfig;
+use crate::detector::Detector;
+
+/// A batch of the voxels `coords` (batch column = sample): features and centres are the voxel
+/// centres, `(c + ½)·voxel_size` (the scene files hold floor-voxelized coordinates); no boxes.
+pub fn scene_batch(coords: &[Coord], voxel_size: [f32; 3]) -> Batch {
+    let mut rows: Vec<Coord> = coords.to_vec();
+    rows.sort_by_key(|c| c[0]);
+    let samples = rows.last().map_or(0, |c| c[0] as usize + 1);
+    let mut b = Batch { voxel_size, offsets: vec![0], ..Default::default() };
+    for s in 0..samples {
+        for c in rows.iter().filter(|c| c[0] as usize == s) {
+            b.coords.push(*c);
+            let centre = [0, 1, 2].map(|k| (c[k + 1] as f32 + 0.5) * voxel_size[k]);
+            b.features.extend_from_slice(&centre);
+            b.centres.extend_from_slice(&centre);
+        }
+        b.offsets.push(b.coords.len());
+        b.boxes.push(Vec::new());
+        b.num_points.push(Vec::new());
+        b.frames.push(("bench".into(), format!("{s:06}")));
+    }
+    b
+}
+
+/// The standard scene tiled `batch` times, or the built-in synthetic one when `coords` is `None`.
+pub fn bench_batch(coords: Option<Vec<Coord>>, batch: usize) -> Batch {
+    let coords = coords.unwrap_or_else(|| scene::synthetic_lidar_scene(20240601));
+    scene_batch(&scene::tile_as_batch(&coords, batch), scene::VOXEL_SIZE.map(|v| v as f32))
+}
+
+/// Figures of one benchmark run.
+#[derive(Debug, Clone, Serialize)]
+pub struct BenchReport {
+    /// `person_minkunet` or `centerpoint`.
+    pub model: String,
+    /// Backend name.
+    pub backend: String,
+    /// rayon threads.
+    pub threads: usize,
+    /// Samples in the batch.
+    pub batch: usize,
+    /// Voxels in the batch.
+    pub voxels: usize,
+    /// Trainable parameters.
+    pub parameters: usize,
+    /// Median inference forward pass, head output read back, ms.
+    pub forward_ms: f64,
+    /// Median detection (forward, decoding and NMS), ms.
+    pub detect_ms: f64,
+    /// Median training step (forward, loss, backward, Adam), ms.
+    pub train_step_ms: f64,
+    /// Peak RSS after the inference runs (forward's peak), MiB.
+    pub peak_forward_mib: f64,
+    /// Peak RSS after the training steps (the process's peak), MiB.
+    pub peak_train_mib: f64,
+    /// Timed runs per figure.
+    pub runs: usize,
+}
+
+pub use sparse_conv::timing::{median_ms, peak_rss_mb as peak_rss_mib};
+
+/// Times `model` (built on `device.autodiff()`) on `batch`; inference runs on its `valid()` copy.
+fn measure<M: Detector>(
+    mut model: M,
+    batch: &Batch,
+    device: &Device,
+    warmup: usize,
+    runs: usize,
+) -> (f64, f64, f64, f64, f64) {
+    let inner = device.clone().inner();
+    let eval = model.valid();
+    let forward_ms = median_ms(warmup, runs, || {
+        std::hint::black_box(eval.head_output(batch, &inner));
+    });
+    let detect_ms = median_ms(0, runs.min(3), || {
+        std::hint::black_box(eval.detect(batch, &inner));
+    });
+    let peak_forward = peak_rss_mib();
+    drop(eval);
+    let mut optim = AdamConfig::new().init();
+    let mut step = || {
+        let terms = model.clone().loss(batch, device);
+        let grads = GradientsParams::from_grads(terms.total.backward(), &model);
+        model = optim.step(1e-3, model.clone(), grads);
+    };
+    let train_ms = median_ms(warmup, runs, &mut step);
+    (forward_ms, detect_ms, train_ms, peak_forward, peak_rss_mib())
+}
+
+/// Benchmarks the model of `cfg` on `batch` on `device` (a plain device; training uses its
+/// autodiff twin).
+pub fn run(cfg: &ModelConfig, batch: &Batch, device: &Device, backend: &str, warmup: usize, runs: usize) -> BenchReport {
+    let ad = device.clone().autodiff();
+    let (parameters, (forward_ms, detect_ms, train_step_ms, peak_forward_mib, peak_train_mib)) = match cfg {
+        ModelConfig::PersonMinkunet(c) => {
+            let m = c.init(&ad);
+            (m.num_params(), measure(m, batch, &ad, warmup, runs))
+        }
+        ModelConfig::Centerpoint(c) => {
+            let m = c.init(&ad);
+            (m.num_params(), measure(m, batch, &ad, warmup, runs))
+        }
+    };
+    BenchReport {
+        model: cfg.kind().to_string(),
+        backend: backend.to_string(),
+        threads: rayon_threads(),
+        batch: batch.len(),
+        voxels: batch.num_voxels(),
+        parameters,
+        forward_ms,
+        detect_ms,
+        train_step_ms,
+        peak_forward_mib,
+        peak_train_mib,
+        runs,
+    }
+}
+
+fn rayon_threads() -> usize {
+    rayon::current_num_threads()
+}

@@ -1,0 +1,90 @@
+//! Times an inference forward pass and one training step (forward, loss, backward, Adam) of either
+//! detector on a voxel scene, and reports the peak memory.
+//!
+//! `cargo run -p model --bin model-bench -- --model person_minkunet --coords ../shared/bench/scene_jrdb_like.npy --threads 2`
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use clap::{Parser, ValueEnum};
+use model::bench::{bench_batch, run};
+use model::{CenterPointConfig, ModelConfig, PersonMinkUNetConfig};
+use sparse_conv::burn::tensor::{Device, DeviceKind};
+use sparse_conv::scene;
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum Backend {
+    Flex,
+    Ndarray,
+    Wgpu,
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+#[value(rename_all = "snake_case")]
+enum Kind {
+    PersonMinkunet,
+    Centerpoint,
+}
+
+#[derive(Parser, Debug)]
+#[command(about = "Forward, training-step and memory benchmark of pmunet's detectors")]
+struct Args {
+    /// Which detector (paper defaults).
+    #[arg(long, value_enum, default_value_t = Kind::PersonMinkunet)]
+    model: Kind,
+    /// Voxel coordinates (.npy, N×4 or N×3); default: the built-in synthetic scene.
+    #[arg(long)]
+    coords: Option<PathBuf>,
+    /// Backend.
+    #[arg(long, value_enum, default_value_t = Backend::Flex)]
+    backend: Backend,
+    /// Samples: the scene is tiled this many times.
+    #[arg(long, default_value_t = 2)]
+    batch: usize,
+    /// Width factor of the model (1.0 = paper).
+    #[arg(long, default_value_t = 1.0)]
+    width: f64,
+    /// CPU threads (rayon); 0 = all cores.
+    #[arg(long, default_value_t = 0)]
+    threads: usize,
+    /// Timed runs per figure (the median is reported).
+    #[arg(long, default_value_t = 3)]
+    runs: usize,
+    /// Untimed warm-up runs per figure.
+    #[arg(long, default_value_t = 1)]
+    warmup: usize,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+fn main() -> anyhow::Result<()> {
+    let args = Args::parse();
+    anyhow::ensure!(args.batch >= 1 && args.runs >= 1, "--batch and --runs must be at least 1");
+    rayon::ThreadPoolBuilder::new().num_threads(args.threads).build_global().context("configuring the thread pool")?;
+    let coords = args.coords.as_ref().map(|p| scene::read_npy_coords(p)).transpose()?;
+    let batch = bench_batch(coords, args.batch);
+    let cfg = match args.model {
+        Kind::PersonMinkunet => ModelConfig::PersonMinkunet(PersonMinkUNetConfig { width: args.width, ..Default::default() }),
+        Kind::Centerpoint => ModelConfig::Centerpoint(CenterPointConfig { width: args.width, ..Default::default() }),
+    };
+    let (device, name) = match args.backend {
+        Backend::Flex => (Device::flex(), "flex"),
+        #[allow(deprecated)]
+        Backend::Ndarray => (Device::ndarray(), "ndarray"),
+        Backend::Wgpu => (Device::wgpu(DeviceKind::DefaultDevice), "wgpu"),
+    };
+    let r = run(&cfg, &batch, &device, name, args.warmup, args.runs);
+    if args.json {
+        println!("{}", serde_json::to_string(&r)?);
+    } else {
+        println!(
+            "{} on {} ({} threads): batch {}, {} voxels, {} parameters, median of {} runs",
+            r.model, r.backend, r.threads, r.batch, r.voxels, r.parameters, r.runs
+        );
+        println!("  inference forward   {:>10.1} ms   (detect incl. decode + NMS {:.1} ms)", r.forward_ms, r.detect_ms);
+        println!("  training step       {:>10.1} ms   (forward, loss, backward, Adam)", r.train_step_ms);
+        println!("  peak RSS            {:>10.0} MiB after inference, {:.0} MiB after training", r.peak_forward_mib, r.peak_train_mib);
+    }
+    Ok(())
+}

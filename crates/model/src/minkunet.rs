@@ -1,0 +1,149 @@
+//! The MinkUNet backbone of Person-MinkUNet (SPVNAS layout, spec §1.6).
+
+use burn::config::Config;
+use burn::module::Module;
+use burn::tensor::Device;
+use sparse_conv::SparseTensor;
+use sparse_conv::modules::{
+    ConvBnRelu, ConvBnReluConfig, DeconvBnRelu, DeconvBnReluConfig, ResidualBlock, ResidualBlockConfig, SparseBatchNorm,
+    SparseBatchNormConfig, SubmanifoldConv3d, SubmanifoldConv3dConfig, relu,
+};
+
+/// Shape of the backbone: `channels = [stem, down_1..down_n, up_1..up_n]` (2n + 1 entries), each
+/// multiplied by `width` (the paper's `cr`). The defaults are the paper's.
+#[derive(Config, Debug, PartialEq)]
+pub struct MinkUNetConfig {
+    /// Input feature channels (xyz of the voxel's point).
+    #[config(default = 3)]
+    pub in_channels: usize,
+    #[config(default = "vec![32, 32, 64, 128, 256, 256, 128, 96, 96]")]
+    pub channels: Vec<usize>,
+    #[config(default = 1.0)]
+    pub width: f64,
+}
+
+impl MinkUNetConfig {
+    /// Channels after the width factor, as torchsparse's `int(cr * c)`.
+    pub fn scaled_channels(&self) -> Vec<usize> {
+        self.channels.iter().map(|&c| ((self.width * c as f64) as usize).max(1)).collect()
+    }
+
+    /// Number of down (and up) stages.
+    pub fn stages(&self) -> usize {
+        (self.channels.len() - 1) / 2
+    }
+
+    /// Channels of the per-voxel features the backbone returns.
+    pub fn out_channels(&self) -> usize {
+        *self.scaled_channels().last().expect("channels are not empty")
+    }
+
+    pub fn init(&self, device: &Device) -> MinkUNet {
+        assert!(
+            self.channels.len() >= 3 && self.channels.len() % 2 == 1,
+            "MinkUNet channels need 2n + 1 entries (stem, n down, n up), got {}",
+            self.channels.len()
+        );
+        let cs = self.scaled_channels();
+        let n = self.stages();
+        let stem = [
+            SubmanifoldConv3dConfig::new([self.in_channels, cs[0]]).init(device),
+            SubmanifoldConv3dConfig::new([cs[0], cs[0]]).init(device),
+        ];
+        let stem_norms = [SparseBatchNormConfig::new(cs[0]).init(device), SparseBatchNormConfig::new(cs[0]).init(device)];
+        let down = (1..=n)
+            .map(|i| DownStage {
+                conv: ConvBnReluConfig::new([cs[i - 1], cs[i - 1]]).init(device),
+                blocks: vec![
+                    ResidualBlockConfig::new([cs[i - 1], cs[i]]).init(device),
+                    ResidualBlockConfig::new([cs[i], cs[i]]).init(device),
+                ],
+            })
+            .collect();
+        let up = (0..n)
+            .map(|j| {
+                let (prev, out, skip) = (cs[n + j], cs[n + 1 + j], cs[n - 1 - j]);
+                UpStage {
+                    deconv: DeconvBnReluConfig::new([prev, out]).init(device),
+                    blocks: vec![
+                        ResidualBlockConfig::new([out + skip, out]).init(device),
+                        ResidualBlockConfig::new([out, out]).init(device),
+                    ],
+                }
+            })
+            .collect();
+        MinkUNet { stem: stem.into(), stem_norms: stem_norms.into(), down, up }
+    }
+}
+
+/// Strided conv (k2 s2) → BN → ReLU, then two residual blocks.
+#[derive(Module, Debug)]
+pub struct DownStage {
+    pub conv: ConvBnRelu,
+    pub blocks: Vec<ResidualBlock>,
+}
+
+/// Transposed conv → BN → ReLU, concatenation `[upsampled, skip]`, two residual blocks.
+#[derive(Module, Debug)]
+pub struct UpStage {
+    pub deconv: DeconvBnRelu,
+    pub blocks: Vec<ResidualBlock>,
+}
+
+/// Sparse U-Net: features for every input voxel, computed through four (configurable) levels.
+#[derive(Module, Debug)]
+pub struct MinkUNet {
+    pub stem: Vec<SubmanifoldConv3d>,
+    pub stem_norms: Vec<SparseBatchNorm>,
+    pub down: Vec<DownStage>,
+    pub up: Vec<UpStage>,
+}
+
+/// Every level a forward pass went through: `down[0]` is the stem output (stride 1), `down[i]`
+/// stage i's (stride 2^i); `up[j]` up stage j's output, on the coordinates of `down[n − 1 − j]`.
+#[derive(Debug, Clone)]
+pub struct UNetLevels {
+    /// Stem and down-stage outputs, finest first.
+    pub down: Vec<SparseTensor>,
+    /// Up-stage outputs, coarsest first; the last is the backbone's output.
+    pub up: Vec<SparseTensor>,
+}
+
+impl MinkUNet {
+    /// Per-voxel features on the input's voxels (stride 1).
+    pub fn forward(&self, x: SparseTensor) -> SparseTensor {
+        let mut levels = self.forward_levels(x);
+        match levels.up.pop() {
+            Some(out) => out,
+            None => levels.down.pop().expect("the stem always runs"),
+        }
+    }
+
+    /// The forward pass keeping every level's output (for checks of the stride bookkeeping).
+    pub fn forward_levels(&self, x: SparseTensor) -> UNetLevels {
+        let mut x = x;
+        for (conv, norm) in self.stem.iter().zip(&self.stem_norms) {
+            x = relu(norm.forward(conv.forward(x)));
+        }
+        let mut down = vec![x];
+        for stage in &self.down {
+            let mut y = stage.conv.forward(down.last().unwrap().clone());
+            for block in &stage.blocks {
+                y = block.forward(y);
+            }
+            down.push(y);
+        }
+        let mut up: Vec<SparseTensor> = Vec::with_capacity(self.up.len());
+        let n = down.len();
+        for (j, stage) in self.up.iter().enumerate() {
+            let below = up.last().unwrap_or(&down[n - 1]).clone();
+            // Concatenation order is [upsampled, skip] (spec §1.6).
+            let mut y = stage.deconv.forward(below).cat(&down[n - 2 - j]);
+            for block in &stage.blocks {
+                y = block.forward(y);
+            }
+            up.push(y);
+        }
+        UNetLevels { down, up }
+    }
+}

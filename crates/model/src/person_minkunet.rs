@@ -1,0 +1,84 @@
+//! Person-MinkUNet: the MinkUNet backbone, a per-voxel linear head (spec §1.8), and the
+//! [`Detector`] implementation tying targets, loss and decoding together.
+
+use data_jrdb::Batch;
+use sparse_conv::SparseTensor;
+use sparse_conv::burn::module::Module;
+use sparse_conv::burn::nn::{Linear, LinearConfig};
+use sparse_conv::burn::tensor::{Device, Tensor, TensorData};
+
+use crate::box_coder::BoxCoder;
+use crate::config::PersonMinkUNetConfig;
+use crate::decode::decode;
+use crate::detector::{Detections, Detector, LossTerms};
+use crate::loss::{LossWeights, loss};
+use crate::minkunet::MinkUNet;
+use crate::targets::assign;
+
+/// The sparse detector: `M × 3` voxel features → `M × (2·bins + 7)` per-voxel outputs.
+#[derive(Module, Debug)]
+pub struct PersonMinkUNet {
+    /// Sparse U-Net, features on every input voxel.
+    pub backbone: MinkUNet,
+    /// Per-voxel classifier, `nn.Linear(96·cr, 2·bins + 7)` with bias, PyTorch's default init.
+    pub head: Linear,
+    /// The configuration it was built from (targets, loss weights, post-processing).
+    #[module(skip)]
+    pub config: PersonMinkUNetConfig,
+}
+
+impl PersonMinkUNet {
+    /// A model with fresh parameters (spec §1.6 initialisation).
+    pub fn new(config: &PersonMinkUNetConfig, device: &Device) -> Self {
+        let backbone_cfg = config.backbone();
+        let coder = BoxCoder::new(config.mean_size, config.num_bins);
+        PersonMinkUNet {
+            backbone: backbone_cfg.init(device),
+            head: LinearConfig::new(backbone_cfg.out_channels(), coder.channels()).init(device),
+            config: config.clone(),
+        }
+    }
+
+    /// The box coder of the config.
+    pub fn coder(&self) -> BoxCoder {
+        BoxCoder::new(self.config.mean_size, self.config.num_bins)
+    }
+
+    /// The loss weights of the config.
+    pub fn loss_weights(&self) -> LossWeights {
+        let c = &self.config;
+        LossWeights { cls: c.cls_weight, loc: c.loc_weight, dims: c.dims_weight, bin: c.bin_weight, residual: c.residual_weight }
+    }
+
+    /// The batch's voxels as a stride-1 sparse tensor on `device`.
+    ///
+    /// # Panics
+    /// If the batch's coordinates repeat a voxel (a collated batch never does).
+    pub fn input(batch: &Batch, device: &Device) -> SparseTensor {
+        let m = batch.num_voxels();
+        let features = Tensor::<2>::from_data(TensorData::new(batch.features.clone(), [m, 3]), device);
+        SparseTensor::new(features, batch.coords.clone()).expect("a collated batch has unique, in-range voxels")
+    }
+
+    /// Head output for every voxel of the batch, `[M, 2·bins + 7]` (layout in [`crate::box_coder`]).
+    pub fn forward(&self, batch: &Batch, device: &Device) -> Tensor<2> {
+        let x = self.backbone.forward(Self::input(batch, device));
+        self.head.forward(x.into_features())
+    }
+}
+
+impl Detector for PersonMinkUNet {
+    fn loss(&self, batch: &Batch, device: &Device) -> LossTerms {
+        let out = self.forward(batch, device);
+        let targets = assign(batch, &self.coder(), self.config.epsilon, self.config.target);
+        loss(out, &targets, self.config.num_bins, &self.loss_weights(), device)
+    }
+
+    fn head_output(&self, batch: &Batch, device: &Device) -> Vec<f32> {
+        self.forward(batch, device).into_data().try_to_vec::<f32>().expect("f32 head output")
+    }
+
+    fn detect(&self, batch: &Batch, device: &Device) -> Vec<Detections> {
+        decode(&self.head_output(batch, device), batch, &self.coder(), &self.config.post)
+    }
+}

@@ -1,0 +1,90 @@
+//! Simulated frames, a short training loop and AP@0.3 for the model tests.
+#![allow(dead_code)]
+
+use data_jrdb::sim::{SynthConfig, synth};
+use data_jrdb::{Batch, DatasetConfig, JrdbDataset, SampleConfig, Split, collate, prepare};
+use eval::ap::{Frame, Overlap, Protocol, evaluate};
+use eval::kitti::KittiObject;
+use model::{Detections, Detector};
+use rand::SeedableRng;
+use sparse_conv::burn::optim::{AdamConfig, GradientsParams};
+use sparse_conv::burn::tensor::Device;
+
+/// `frames` simulated frames (one sequence), points and boxes cropped to `radius` metres in BEV,
+/// voxelized without augmentation, as one batch.
+pub fn sim_batch(name: &str, frames: usize, max_people: usize, radius: f32, seed: u64) -> Batch {
+    let root = std::env::temp_dir().join(format!("pmunet-model-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&root);
+    synth(&root, &SynthConfig { sequences: 1, frames, seed, max_people, ..Default::default() }).unwrap();
+    let ds = JrdbDataset::open(&root, &DatasetConfig { split: Split::TrainVal, ..Default::default() }).unwrap();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let samples = (0..ds.len())
+        .map(|i| {
+            let mut f = ds.load(i).unwrap();
+            f.points.retain(|p| p[0].hypot(p[1]) < radius);
+            let keep: Vec<bool> = f.boxes.iter().map(|b| (b.bev_range() as f32) < radius - 0.5).collect();
+            let mut k = keep.iter();
+            f.boxes.retain(|_| *k.next().unwrap());
+            let mut k = keep.iter();
+            f.num_points.retain(|_| *k.next().unwrap());
+            prepare(f, &SampleConfig::eval(), &mut rng)
+        })
+        .collect();
+    let _ = std::fs::remove_dir_all(&root);
+    collate(samples, SampleConfig::eval().voxel.voxel_size)
+}
+
+/// Official-protocol AP at 3D IoU 0.3 of `dets` against the batch's boxes (recounted `num_points`
+/// from the in-box voxels, so the ≥ 10 filter sees this crop).
+///
+/// The official AP samples precision at 40 recall steps from the true positives' scores, so with
+/// fewer than 41 valid GT it cannot reach 1 (6 GT cap it at 5/40). The frames are therefore
+/// evaluated as enough identical copies to hold at least 80 valid GT: precision and recall at
+/// every threshold are those of the frames themselves.
+pub fn ap03(batch: &Batch, dets: &[Detections]) -> f64 {
+    let copies = 80usize.div_ceil(valid_gt(batch).max(1));
+    let frames: Vec<Frame> = (0..batch.len() * copies)
+        .map(|i| (i, i % batch.len()))
+        .map(|(i, s)| (format!("{i:06}"), s))
+        .map(|(name, s)| {
+            let pts: Vec<[f32; 3]> = batch.features[3 * batch.offsets[s]..3 * batch.offsets[s + 1]].chunks(3).map(|c| [c[0], c[1], c[2]]).collect();
+            Frame {
+                sequence: "seq".into(),
+                name,
+                gt: batch.boxes[s].iter().map(|b| KittiObject::from_box3d(b, b.count_inside(&pts) as i32, 1.0)).collect(),
+                det: dets[s].boxes.iter().zip(&dets[s].scores).map(|(b, &sc)| KittiObject::from_box3d(b, -1, sc as f64)).collect(),
+            }
+        })
+        .collect();
+    evaluate(&frames, 0.3, Overlap::Box3d, &Protocol::official()).ap
+}
+
+/// Valid GT (≥ 10 voxels) in the batch.
+pub fn valid_gt(batch: &Batch) -> usize {
+    (0..batch.len())
+        .map(|s| {
+            let pts: Vec<[f32; 3]> = batch.features[3 * batch.offsets[s]..3 * batch.offsets[s + 1]].chunks(3).map(|c| [c[0], c[1], c[2]]).collect();
+            batch.boxes[s].iter().filter(|b| b.count_inside(&pts) >= 10).count()
+        })
+        .sum()
+}
+
+/// Trains `model` on `batch` for `steps` Adam steps at `lr`; returns it and the loss of every step.
+pub fn train<M: Detector>(mut model: M, batch: &Batch, device: &Device, steps: usize, lr: f64) -> (M, Vec<f64>) {
+    let mut optim = AdamConfig::new().init();
+    let mut losses = Vec::with_capacity(steps);
+    for _ in 0..steps {
+        let terms = model.loss(batch, device);
+        losses.push(terms.total.to_data().try_to_vec::<f32>().unwrap()[0] as f64);
+        let grads = GradientsParams::from_grads(terms.total.backward(), &model);
+        model = optim.step(lr, model, grads);
+    }
+    (model, losses)
+}
+
+/// Mean of the first and of the last `n` losses.
+pub fn head_tail(losses: &[f64], n: usize) -> (f64, f64) {
+    let n = n.min(losses.len());
+    let mean = |s: &[f64]| s.iter().sum::<f64>() / s.len() as f64;
+    (mean(&losses[..n]), mean(&losses[losses.len() - n..]))
+}
