@@ -1,1 +1,53 @@
-//! Placeholder until its issue lands.
+//! The pmunet experiment runner: one TOML file trains and evaluates a detector; a sweep file runs
+//! variants × seeds and tabulates them.
+//!
+//! Crate map:
+//! - setup: [`config`] (the run's TOML), [`schedule`] (lr, spec §1.11), [`backend`] (flex, ndarray,
+//!   wgpu; threads), [`data`] (simulated data on first use, splits, loaders);
+//! - a run: [`run_dir`] (the folder), [`trainer`] (the loop), [`validate`] (AP3D with `eval`),
+//!   [`checkpoint`] (atomic best/latest, resume), [`metrics`] (CSV), [`plots`] (PNG), [`progress`];
+//! - after a run: [`infer`] (detection files, official layout, scores), [`render`] (BEV PNGs);
+//! - many runs: [`sweep`].
+//!
+//! The binary (`cargo run -p train -- --help`) wraps [`trainer::train`], [`infer::infer`] and
+//! [`sweep::run_sweep`].
+#![warn(missing_docs)]
+
+/// Backend choice and threads.
+pub mod backend;
+/// Atomic checkpoints and the loop state.
+pub mod checkpoint;
+/// The run configuration (TOML).
+pub mod config;
+/// Datasets and loaders of a run.
+pub mod data;
+/// Detection files and scores from a checkpoint.
+pub mod infer;
+/// CSV curves.
+pub mod metrics;
+/// PNG plots.
+pub mod plots;
+/// Progress bars.
+pub mod progress;
+/// Bird's-eye-view images.
+pub mod render;
+/// The run folder.
+pub mod run_dir;
+/// Learning-rate schedules.
+pub mod schedule;
+/// Sweeps over variants and seeds.
+pub mod sweep;
+/// The training loop.
+pub mod trainer;
+/// Validation.
+pub mod validate;
+
+pub use backend::BackendKind;
+pub use checkpoint::{Checkpoints, Slot, TrainState};
+pub use config::RunConfig;
+pub use infer::{InferOptions, InferOutput, infer};
+pub use run_dir::{Existing, RunDir};
+pub use schedule::Schedule;
+pub use sweep::{SweepConfig, SweepResults, run_sweep};
+pub use trainer::{TrainOptions, TrainSummary, train, train_model};
+pub use validate::{FrameResult, Validation, validate};

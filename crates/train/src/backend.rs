@@ -1,0 +1,63 @@
+//! The tensor backend, chosen at run time (`backend = "flex" | "ndarray" | "wgpu"`, `--backend`),
+//! and the CPU thread count.
+
+use anyhow::{Result, anyhow};
+use burn::tensor::{Device, DeviceKind};
+use serde::{Deserialize, Serialize};
+
+/// Which Burn backend runs the numerics.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "snake_case")]
+pub enum BackendKind {
+    /// Burn's maintained pure-Rust CPU backend.
+    #[default]
+    Flex,
+    /// The ndarray CPU backend (deprecated by Burn 0.22, kept for comparison).
+    Ndarray,
+    /// wgpu on the default adapter (a GPU, or Mesa's lavapipe on a CPU).
+    Wgpu,
+}
+
+impl BackendKind {
+    /// The plain (non-autodiff) device; `.autodiff()` of it trains.
+    #[allow(deprecated)]
+    pub fn device(self) -> Device {
+        match self {
+            BackendKind::Flex => Device::flex(),
+            BackendKind::Ndarray => Device::ndarray(),
+            BackendKind::Wgpu => Device::wgpu(DeviceKind::DefaultDevice),
+        }
+    }
+
+    /// The name `BURN_DEVICE` knows it by.
+    pub fn name(self) -> &'static str {
+        match self {
+            BackendKind::Flex => "flex",
+            BackendKind::Ndarray => "ndarray",
+            BackendKind::Wgpu => "wgpu",
+        }
+    }
+
+    /// Makes this backend Burn's default device for the process.
+    ///
+    /// Burn loads optimizer state onto `Device::default()` (which prefers wgpu whenever it is
+    /// compiled in, adapter or not), so a resumed CPU run needs the default pinned to its own backend.
+    ///
+    /// # Safety
+    /// Sets an environment variable: call it before any other thread exists (first thing in `main`).
+    pub unsafe fn pin_default_device(self) {
+        // SAFETY: the caller guarantees no other thread reads the environment concurrently.
+        unsafe { std::env::set_var("BURN_DEVICE", self.name()) };
+    }
+}
+
+/// Sizes the global thread pool the CPU kernels run on (`None`: one thread per core). Calling it
+/// again with another size is an error; with the same size (or `None`) it is a no-op.
+pub fn init_threads(threads: Option<usize>) -> Result<()> {
+    let Some(n) = threads else { return Ok(()) };
+    match rayon::ThreadPoolBuilder::new().num_threads(n).build_global() {
+        Ok(()) => Ok(()),
+        Err(_) if rayon::current_num_threads() == n => Ok(()),
+        Err(e) => Err(anyhow!("cannot use {n} threads: the thread pool already has {} ({e})", rayon::current_num_threads())),
+    }
+}

@@ -1,0 +1,421 @@
+//! The run configuration: one TOML file with every setting of a run, parsed strictly.
+//!
+//! Every struct here denies unknown keys, so a typo is an error that names the key instead of a
+//! silently ignored setting. Every key has a default (the paper's, spec §1.1 and §1.11) except
+//! `model.kind`; the fully resolved config, defaults included, is written into the run folder.
+//!
+//! ```toml
+//! name = "quickstart"          # run folder name (default: the config file's stem)
+//! seed = 0                     # model init, data order, augmentation
+//! backend = "flex"             # flex | ndarray | wgpu (overridden by --backend)
+//! threads = 2                  # CPU threads (default: all cores)
+//! out_dir = "runs"             # parent of the run folder (overridden by --out)
+//!
+//! [data]                       # root, splits, voxels, cap, augmentation
+//! [data.simulate]              # present: generate a simulated tree at `root` if it is missing
+//! [model]                      # kind = "person_minkunet" | "centerpoint" and its own keys
+//! [train]                      # epochs, batch size, Adam, schedule, validation cadence
+//! [train.schedule]             # kind = "exp_decay" (spec §1.11) | "constant" | "cosine"
+//! [eval]                       # protocol (range, min points), val batching (NMS: [model.post])
+//! ```
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use data_jrdb::{AugmentConfig, DEFAULT_VAL_SEQUENCES, OnBadFrame, Pooling, SampleConfig, Split, VoxelConfig};
+use model::ModelConfig;
+use serde::{Deserialize, Serialize};
+
+use crate::backend::BackendKind;
+use crate::schedule::Schedule;
+
+/// A whole run: data, model, training and evaluation settings.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RunConfig {
+    /// Name of the run folder; `None`: the config file's stem.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub name: Option<String>,
+    /// Seed of the model's initialisation, the data order and the augmentation.
+    #[serde(default)]
+    pub seed: u64,
+    /// Tensor backend.
+    #[serde(default)]
+    pub backend: BackendKind,
+    /// CPU threads for the numerics; `None`: one per core.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub threads: Option<usize>,
+    /// Folder that holds run folders.
+    #[serde(default = "default_out_dir")]
+    pub out_dir: PathBuf,
+    /// Dataset, splits, voxelization, augmentation.
+    #[serde(default)]
+    pub data: DataConfig,
+    /// The detector (`kind` picks the model; its other keys are the model's own).
+    pub model: ModelConfig,
+    /// Optimisation.
+    #[serde(default)]
+    pub train: TrainConfig,
+    /// Validation and evaluation.
+    #[serde(default)]
+    pub eval: EvalConfig,
+}
+
+fn default_out_dir() -> PathBuf {
+    PathBuf::from("runs")
+}
+
+/// Where the data is and how frames become samples (spec §1.2–§1.5).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DataConfig {
+    /// JRDB-format tree (a plain root or a folder holding `train_dataset_with_activity/`).
+    /// A relative path is relative to the working directory.
+    pub root: PathBuf,
+    /// If present and `root` does not exist, a simulated tree is generated there first.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub simulate: Option<SimulateConfig>,
+    /// Split trained on.
+    pub train_split: Split,
+    /// Split validated on.
+    pub val_split: Split,
+    /// The validation sequences (default: JRDB's 7, spec §1.2).
+    pub val_sequences: Vec<String>,
+    /// Voxel size in metres (x, y, z).
+    pub voxel_size: [f32; 3],
+    /// A voxel's feature: the first point's xyz (the authors') or the mean.
+    pub pooling: Pooling,
+    /// Training voxel cap per frame (30,000); no cap at evaluation.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_voxels: Option<usize>,
+    /// Training augmentation (spec §1.5).
+    pub augment: AugmentSection,
+    /// Unreadable frames: `fail` or `skip` with a warning.
+    pub on_bad_frame: OnBadFrame,
+    /// Prepare the next training batch on a second thread.
+    pub prefetch: bool,
+}
+
+impl Default for DataConfig {
+    fn default() -> Self {
+        Self {
+            root: PathBuf::from("data/jrdb"),
+            simulate: None,
+            train_split: Split::Train,
+            val_split: Split::Val,
+            val_sequences: DEFAULT_VAL_SEQUENCES.map(String::from).to_vec(),
+            voxel_size: [0.05, 0.05, 0.1],
+            pooling: Pooling::First,
+            max_voxels: Some(30_000),
+            augment: AugmentSection::default(),
+            on_bad_frame: OnBadFrame::Fail,
+            prefetch: true,
+        }
+    }
+}
+
+impl DataConfig {
+    /// Per-frame processing of training samples.
+    pub fn train_sample(&self) -> SampleConfig {
+        SampleConfig {
+            voxel: VoxelConfig { voxel_size: self.voxel_size, pooling: self.pooling },
+            augment: self.augment.enabled.then_some(AugmentConfig { scale: self.augment.scale, rotate: self.augment.rotate }),
+            max_voxels: self.max_voxels,
+        }
+    }
+
+    /// Per-frame processing at evaluation: no augmentation, no cap.
+    pub fn eval_sample(&self) -> SampleConfig {
+        SampleConfig { voxel: VoxelConfig { voxel_size: self.voxel_size, pooling: self.pooling }, augment: None, max_voxels: None }
+    }
+}
+
+/// Training augmentation: `p ↦ s·R(α)·p`, `s ~ U(scale)`, `α ~ U(0, 2π)` (spec §1.5).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct AugmentSection {
+    /// Augment at all.
+    pub enabled: bool,
+    /// Range of the scale factor.
+    pub scale: [f64; 2],
+    /// Random rotation about z.
+    pub rotate: bool,
+}
+
+impl Default for AugmentSection {
+    fn default() -> Self {
+        Self { enabled: true, scale: [0.95, 1.05], rotate: true }
+    }
+}
+
+/// The simulated dataset generated when `data.root` is missing (deterministic by `seed`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SimulateConfig {
+    /// Sequences; every fourth from the second gets a validation name.
+    pub sequences: usize,
+    /// Frames per sequence.
+    pub frames: usize,
+    /// Seed of the scenes and scans.
+    pub seed: u64,
+    /// Most people per scene.
+    pub max_people: usize,
+    /// People farther than this (BEV metres) are not labelled.
+    pub label_range: f64,
+}
+
+impl Default for SimulateConfig {
+    fn default() -> Self {
+        Self { sequences: 8, frames: 30, seed: 0, max_people: 40, label_range: 35.0 }
+    }
+}
+
+impl SimulateConfig {
+    /// The simulator's own config.
+    pub fn synth(&self) -> data_jrdb::sim::SynthConfig {
+        data_jrdb::sim::SynthConfig {
+            sequences: self.sequences,
+            frames: self.frames,
+            seed: self.seed,
+            max_people: self.max_people,
+            label_range: self.label_range,
+            ..Default::default()
+        }
+    }
+}
+
+/// Optimisation (spec §1.11): Adam with AMSGrad, the lr set every iteration from the fractional epoch.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TrainConfig {
+    /// Epochs.
+    pub epochs: usize,
+    /// Frames per batch.
+    pub batch_size: usize,
+    /// Drop the last, smaller batch of an epoch.
+    pub drop_last: bool,
+    /// Adam.
+    pub optimizer: OptimizerConfig,
+    /// Learning-rate schedule.
+    pub schedule: Schedule,
+    /// Validate every this many epochs (and after the last); 0: only after the last.
+    pub val_every: usize,
+    /// Also write the latest checkpoint every this many steps (0: at epoch ends only).
+    pub checkpoint_every: u64,
+}
+
+impl Default for TrainConfig {
+    fn default() -> Self {
+        Self {
+            epochs: 40,
+            batch_size: 36,
+            drop_last: false,
+            optimizer: OptimizerConfig::default(),
+            schedule: Schedule::default(),
+            val_every: 1,
+            checkpoint_every: 0,
+        }
+    }
+}
+
+/// Adam's settings; the defaults are PyTorch's (the authors'), with AMSGrad on.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct OptimizerConfig {
+    /// β₁.
+    pub beta_1: f32,
+    /// β₂.
+    pub beta_2: f32,
+    /// ε (PyTorch's 1e-8; Burn's own default would be 1e-5).
+    pub epsilon: f32,
+    /// AMSGrad.
+    pub amsgrad: bool,
+    /// L2 weight decay (0: none).
+    pub weight_decay: f32,
+    /// Clip the gradient to this global L2 norm (`None`: no clipping, as the authors).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub grad_clip_norm: Option<f32>,
+}
+
+impl Default for OptimizerConfig {
+    fn default() -> Self {
+        Self { beta_1: 0.9, beta_2: 0.999, epsilon: 1e-8, amsgrad: true, weight_decay: 0.0, grad_clip_norm: None }
+    }
+}
+
+/// Validation: the JRDB protocol and how the split is batched. The score threshold and NMS that
+/// make detections are the model's (`[model.post]`), so `infer` and validation share them.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct EvalConfig {
+    /// Ignore GT and detections beyond this BEV range (official: 25 m); `None`: no filter (non-official).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_range: Option<f64>,
+    /// Ignore GT with fewer points (official: 10).
+    pub min_points: i32,
+    /// Frames per validation batch (the authors evaluate one at a time).
+    pub batch_size: usize,
+    /// Validate on every n-th frame of the split (1: all).
+    pub frame_stride: usize,
+}
+
+impl Default for EvalConfig {
+    fn default() -> Self {
+        Self { max_range: Some(25.0), min_points: 10, batch_size: 1, frame_stride: 1 }
+    }
+}
+
+impl EvalConfig {
+    /// The evaluator's protocol.
+    pub fn protocol(&self) -> eval::Protocol {
+        eval::Protocol { max_range: self.max_range, min_points: self.min_points, ..eval::Protocol::official() }
+    }
+}
+
+impl RunConfig {
+    /// Parses a config from TOML text; unknown keys are errors naming the key.
+    pub fn from_toml_str(text: &str) -> Result<Self> {
+        let cfg: RunConfig = toml::from_str(text).map_err(|e| anyhow::anyhow!("{e}"))?;
+        cfg.validate()?;
+        Ok(cfg)
+    }
+
+    /// Parses a config from a TOML value (after overrides); unknown keys are errors naming the key.
+    pub fn from_toml_value(value: toml::Value) -> Result<Self> {
+        let cfg: RunConfig = value.try_into().map_err(|e: toml::de::Error| anyhow::anyhow!("{e}"))?;
+        cfg.validate()?;
+        Ok(cfg)
+    }
+
+    /// Reads a config file, applying `overrides` (`key.path=value`, value in TOML syntax) first.
+    /// The run's name defaults to the file's stem.
+    pub fn load(path: &Path, overrides: &[String]) -> Result<Self> {
+        let text = std::fs::read_to_string(path).with_context(|| format!("reading config {}", path.display()))?;
+        let mut value: toml::Value = toml::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
+        for o in overrides {
+            let (key, v) = o.split_once('=').with_context(|| format!("override `{o}` is not KEY=VALUE"))?;
+            set_key(&mut value, key.trim(), parse_value(v.trim())?)?;
+        }
+        let mut cfg = Self::from_toml_value(value).with_context(|| format!("in config {}", path.display()))?;
+        if cfg.name.is_none() {
+            cfg.name = path.file_stem().map(|s| s.to_string_lossy().into_owned());
+        }
+        Ok(cfg)
+    }
+
+    /// The fully resolved config as TOML (defaults included).
+    pub fn to_toml(&self) -> Result<String> {
+        Ok(toml::to_string_pretty(self)?)
+    }
+
+    /// Checks values serde cannot.
+    pub fn validate(&self) -> Result<()> {
+        if self.train.batch_size == 0 || self.eval.batch_size == 0 {
+            bail!("train.batch_size and eval.batch_size must be at least 1");
+        }
+        if self.eval.frame_stride == 0 {
+            bail!("eval.frame_stride must be at least 1");
+        }
+        if self.threads == Some(0) {
+            bail!("threads must be at least 1 (leave it out for one per core)");
+        }
+        if self.data.voxel_size.iter().any(|&v| !(v > 0.0)) {
+            bail!("data.voxel_size must be positive, got {:?}", self.data.voxel_size);
+        }
+        self.train.schedule.validate()?;
+        Ok(())
+    }
+}
+
+/// Parses an override's value as TOML (`3`, `0.5`, `true`, `"text"`, `[1, 2]`); a bare word is a string.
+pub fn parse_value(text: &str) -> Result<toml::Value> {
+    let doc: Result<toml::Table, _> = toml::from_str(&format!("v = {text}"));
+    Ok(match doc {
+        Ok(mut t) => t.remove("v").expect("parsed key"),
+        Err(_) => toml::Value::String(text.to_string()),
+    })
+}
+
+/// Sets `key.path` in a TOML document, creating tables on the way. Whether the key exists in the
+/// config is checked when the document is parsed into a [`RunConfig`].
+pub fn set_key(doc: &mut toml::Value, key: &str, value: toml::Value) -> Result<()> {
+    let parts: Vec<&str> = key.split('.').collect();
+    if parts.iter().any(|p| p.is_empty()) {
+        bail!("bad key `{key}`");
+    }
+    let mut node = doc;
+    for p in &parts[..parts.len() - 1] {
+        let table = node.as_table_mut().with_context(|| format!("`{key}`: `{p}` is inside a value, not a table"))?;
+        node = table.entry(p.to_string()).or_insert_with(|| toml::Value::Table(Default::default()));
+    }
+    let table = node.as_table_mut().with_context(|| format!("`{key}`: the parent is not a table"))?;
+    table.insert(parts[parts.len() - 1].to_string(), value);
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const MIN: &str = "[model]\nkind = \"person_minkunet\"\n";
+
+    #[test]
+    fn minimal_config_gets_the_papers_defaults() {
+        let c = RunConfig::from_toml_str(MIN).unwrap();
+        assert_eq!(c.train.epochs, 40);
+        assert_eq!(c.train.batch_size, 36);
+        assert_eq!(c.data.voxel_size, [0.05, 0.05, 0.1]);
+        assert_eq!(c.data.max_voxels, Some(30_000));
+        assert!(c.train.optimizer.amsgrad);
+        assert_eq!(c.train.schedule, Schedule::ExpDecay { lr0: 1e-3, epoch0: 15.0, lr1: 1e-6, epoch1: 40.0 });
+        assert_eq!(c.backend, BackendKind::Flex);
+    }
+
+    #[test]
+    fn unknown_keys_are_errors_naming_the_key() {
+        for (text, key) in [
+            (format!("seeed = 1\n{MIN}"), "seeed"),
+            (format!("{MIN}[train]\nepochz = 3\n"), "epochz"),
+            (format!("{MIN}[train.optimizer]\namsgrd = true\n"), "amsgrd"),
+            (format!("{MIN}[train.schedule]\nkind = \"constant\"\nlr = 1e-3\nlr0 = 2\n"), "lr0"),
+            (format!("{MIN}[data.augment]\nflip = true\n"), "flip"),
+            (format!("{MIN}[data.simulate]\nscenes = 3\n"), "scenes"),
+            (format!("{MIN}[eval]\nnms = 0.3\n"), "nms"),
+            ("[model]\nkind = \"person_minkunet\"\nwidht = 0.5\n".to_string(), "widht"),
+        ] {
+            let e = RunConfig::from_toml_str(&text).expect_err(&text).to_string();
+            assert!(e.contains(key), "error for `{key}` does not name it: {e}");
+        }
+    }
+
+    #[test]
+    fn missing_model_kind_and_bad_values_are_errors() {
+        assert!(RunConfig::from_toml_str("seed = 1\n").unwrap_err().to_string().contains("model"));
+        assert!(RunConfig::from_toml_str(&format!("{MIN}[train]\nbatch_size = 0\n")).is_err());
+        assert!(RunConfig::from_toml_str(&format!("backend = \"cuda\"\n{MIN}")).unwrap_err().to_string().contains("cuda"));
+        assert!(RunConfig::from_toml_str(&format!("{MIN}[train.schedule]\nkind = \"exp_decay\"\nlr0 = -1.0\n")).is_err());
+    }
+
+    #[test]
+    fn resolved_config_round_trips() {
+        let text = format!("seed = 7\nthreads = 2\n{MIN}[data.simulate]\nsequences = 3\n[train.schedule]\nkind = \"cosine\"\nlr = 0.01\n");
+        let c = RunConfig::from_toml_str(&text).unwrap();
+        let back = RunConfig::from_toml_str(&c.to_toml().unwrap()).unwrap();
+        assert_eq!(c, back);
+        assert!(c.to_toml().unwrap().contains("epochs = 40"), "defaults are written out");
+    }
+
+    #[test]
+    fn overrides_set_nested_keys_and_unknown_ones_fail() {
+        let mut v: toml::Value = toml::from_str(MIN).unwrap();
+        set_key(&mut v, "train.epochs", parse_value("3").unwrap()).unwrap();
+        set_key(&mut v, "data.root", parse_value("some/dir").unwrap()).unwrap();
+        set_key(&mut v, "train.schedule.kind", parse_value("\"constant\"").unwrap()).unwrap();
+        let c = RunConfig::from_toml_value(v.clone()).unwrap();
+        assert_eq!(c.train.epochs, 3);
+        assert_eq!(c.data.root, PathBuf::from("some/dir"));
+        assert_eq!(c.train.schedule, Schedule::Constant { lr: 1e-3 });
+        set_key(&mut v, "train.nope", parse_value("1").unwrap()).unwrap();
+        assert!(RunConfig::from_toml_value(v).unwrap_err().to_string().contains("nope"));
+    }
+}

@@ -1,0 +1,121 @@
+//! The run's data: the simulated tree generated on first use, the two splits, and their loaders.
+
+use std::sync::Arc;
+use std::sync::mpsc::sync_channel;
+
+use anyhow::{Context, Result, bail};
+use data_jrdb::sim::{SynthSummary, synth};
+use data_jrdb::{Batch, DatasetConfig, JrdbDataset, Loader, LoaderConfig, NonFinite, Split};
+
+use crate::config::{DataConfig, RunConfig};
+
+/// Makes sure `data.root` exists: when it does not and the config has `[data.simulate]`, the
+/// simulated tree is generated there (into a temporary sibling folder renamed into place when
+/// complete, so an interrupted generation is redone rather than half-used). Returns what was written.
+pub fn ensure_dataset(cfg: &DataConfig) -> Result<Option<SynthSummary>> {
+    if cfg.root.exists() {
+        return Ok(None);
+    }
+    let Some(sim) = &cfg.simulate else {
+        bail!(
+            "data root {} does not exist (point data.root at a JRDB tree, or add a [data.simulate] section to generate a simulated one)",
+            cfg.root.display()
+        );
+    };
+    let tmp = crate::run_dir::tmp_name(&cfg.root);
+    if tmp.exists() {
+        std::fs::remove_dir_all(&tmp)?;
+    }
+    if let Some(parent) = tmp.parent() {
+        std::fs::create_dir_all(parent)?;
+    }
+    eprintln!(
+        "generating the simulated dataset ({} sequences × {} frames, seed {}) at {}",
+        sim.sequences,
+        sim.frames,
+        sim.seed,
+        cfg.root.display()
+    );
+    let summary = synth(&tmp, &sim.synth()).with_context(|| format!("simulating into {}", tmp.display()))?;
+    std::fs::rename(&tmp, &cfg.root).with_context(|| format!("renaming {} to {}", tmp.display(), cfg.root.display()))?;
+    Ok(Some(summary))
+}
+
+/// Opens one split of the tree, keeping every `stride`-th frame.
+pub fn open_split(cfg: &DataConfig, split: Split, stride: usize) -> Result<Arc<JrdbDataset>> {
+    let dcfg = DatasetConfig {
+        split,
+        val_sequences: cfg.val_sequences.clone(),
+        sequences: None,
+        non_finite: NonFinite::Drop,
+        on_bad_frame: cfg.on_bad_frame,
+        require_labels: true,
+    };
+    let mut ds = JrdbDataset::open(&cfg.root, &dcfg).with_context(|| format!("opening {:?} split of {}", split, cfg.root.display()))?;
+    if stride > 1 {
+        ds.frames = ds.frames.into_iter().step_by(stride).collect();
+    }
+    if ds.is_empty() {
+        bail!("the {:?} split of {} has no frames (sequences: {:?})", split, cfg.root.display(), ds.sequences);
+    }
+    Ok(Arc::new(ds))
+}
+
+/// The training loader: shuffled by `seed`, augmented, capped.
+pub fn train_loader(cfg: &RunConfig) -> Result<Loader> {
+    let ds = open_split(&cfg.data, cfg.data.train_split, 1)?;
+    Ok(Loader::new(
+        ds,
+        LoaderConfig {
+            batch_size: cfg.train.batch_size,
+            shuffle: true,
+            drop_last: cfg.train.drop_last,
+            seed: cfg.seed,
+            sample: cfg.data.train_sample(),
+            on_bad_frame: cfg.data.on_bad_frame,
+            prefetch: cfg.data.prefetch,
+        },
+    ))
+}
+
+/// An evaluation loader over `split`: file order, no augmentation, no cap, every `eval.frame_stride`-th frame.
+pub fn eval_loader(cfg: &RunConfig, split: Split) -> Result<Loader> {
+    let ds = open_split(&cfg.data, split, cfg.eval.frame_stride)?;
+    Ok(Loader::new(
+        ds,
+        LoaderConfig {
+            batch_size: cfg.eval.batch_size,
+            shuffle: false,
+            drop_last: false,
+            seed: cfg.seed,
+            sample: cfg.data.eval_sample(),
+            on_bad_frame: cfg.data.on_bad_frame,
+            prefetch: cfg.data.prefetch,
+        },
+    ))
+}
+
+/// The batches of `epoch` from its `skip`-th on (a resumed run starts mid-epoch), prepared one
+/// ahead on a second thread when `prefetch`. Batches whose frames were all skipped are left out.
+pub fn batches_from(loader: &Loader, epoch: u64, skip: usize, prefetch: bool) -> Box<dyn Iterator<Item = Result<Batch>> + Send> {
+    let plan: Vec<Vec<usize>> = loader.plan(epoch).into_iter().skip(skip).collect();
+    if !prefetch {
+        let loader = loader.clone();
+        return Box::new(
+            plan.into_iter().map(move |f| loader.make_batch(epoch, &f).map_err(anyhow::Error::from)).filter(|r| !matches!(r, Ok(b) if b.is_empty())),
+        );
+    }
+    let (tx, rx) = sync_channel(1);
+    let loader = loader.clone();
+    std::thread::spawn(move || {
+        for frames in plan {
+            let r = loader.make_batch(epoch, &frames).map_err(anyhow::Error::from);
+            let stop = r.is_err();
+            if tx.send(r).is_err() || stop {
+                break;
+            }
+        }
+    });
+    Box::new(rx.into_iter().filter(|r| !matches!(r, Ok(b) if b.is_empty())))
+}
+

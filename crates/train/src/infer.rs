@@ -1,0 +1,125 @@
+//! Inference from a run's checkpoint: detections for a split written as pmunet JSON and as the
+//! official KITTI-style txt tree (with the matching GT tree), scored with `eval`, optionally drawn.
+//!
+//! ```text
+//! runs/<name>/detections/<split>/json/<sequence>.json     pmunet detection files (eval::jrdb)
+//! runs/<name>/detections/<split>/kitti/<sequence>/<frame>.txt   detections, official layout
+//! runs/<name>/detections/<split>/kitti_gt/<sequence>/<frame>.txt   the GT the official tool reads
+//! runs/<name>/detections/<split>/eval.json, eval.txt, pr.csv, pr.png
+//! runs/<name>/render/<split>/<sequence>_<frame>.png   with --render N
+//! ```
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use burn::tensor::Device;
+use data_jrdb::Split;
+use eval::jrdb::{DetectionFile, write_detections};
+use eval::kitti::FileKind;
+use model::{Detector, ModelConfig};
+use serde_json::json;
+
+use crate::backend::{BackendKind, init_threads};
+use crate::checkpoint::{CheckpointFiles, Checkpoints, Slot, best_or_latest};
+use crate::data::{ensure_dataset, eval_loader};
+use crate::render::render_frames;
+use crate::run_dir::RunDir;
+use crate::validate::{FrameResult, score, detect_split};
+
+/// What to infer.
+#[derive(Debug, Clone)]
+pub struct InferOptions {
+    /// The split.
+    pub split: Split,
+    /// `best` (default when a validation happened) or `latest`.
+    pub checkpoint: Option<Slot>,
+    /// Draw the first N frames.
+    pub render: usize,
+    /// Backend override.
+    pub backend: Option<BackendKind>,
+    /// Progress bars and the report table on stderr.
+    pub verbose: bool,
+}
+
+/// What inference wrote and scored.
+#[derive(Debug, Clone)]
+pub struct InferOutput {
+    /// The detections folder.
+    pub dir: PathBuf,
+    /// AP3D at 0.3/0.5/0.7.
+    pub ap3d: [f64; 3],
+    /// The report's table.
+    pub table: String,
+    /// Frames scored.
+    pub frames: usize,
+}
+
+/// The split's folder name.
+pub fn split_name(split: Split) -> &'static str {
+    match split {
+        Split::Train => "train",
+        Split::Val => "val",
+        Split::TrainVal => "train_val",
+    }
+}
+
+/// Loads the run's model from a checkpoint and writes, scores and draws its detections.
+pub fn infer(run: &RunDir, opts: &InferOptions) -> Result<InferOutput> {
+    let mut cfg = run.config()?;
+    if let Some(b) = opts.backend {
+        cfg.backend = b;
+    }
+    init_threads(cfg.threads)?;
+    let files = match opts.checkpoint {
+        None => best_or_latest(&run.checkpoints())?,
+        Some(s) => Checkpoints::new(run.checkpoints()).get(s)?.with_context(|| format!("{} has no {s:?} checkpoint", run.root.display()))?,
+    };
+    let device = cfg.backend.device();
+    match &cfg.model {
+        ModelConfig::PersonMinkunet(c) => infer_model(c.init(&device), &files, run, &cfg, opts, &device),
+        ModelConfig::Centerpoint(c) => infer_model(c.init(&device), &files, run, &cfg, opts, &device),
+    }
+}
+
+fn infer_model<D: Detector>(model: D, files: &CheckpointFiles, run: &RunDir, cfg: &crate::config::RunConfig, opts: &InferOptions, device: &Device) -> Result<InferOutput> {
+    let model = files.load_model(model)?.valid();
+    ensure_dataset(&cfg.data)?;
+    let loader = eval_loader(cfg, opts.split)?;
+    let frames = detect_split(&model, &loader, device, opts.verbose)?;
+    let dir = run.detections(split_name(opts.split));
+    let report = write_results(&frames, &dir, &cfg.eval.protocol())?;
+    let mut eval_json = report.to_json();
+    if let Some(obj) = eval_json.as_object_mut() {
+        obj.insert("checkpoint".into(), json!(files.dir.file_name().map(|n| n.to_string_lossy().into_owned())));
+        obj.insert("split".into(), json!(split_name(opts.split)));
+    }
+    std::fs::write(dir.join("eval.json"), serde_json::to_string_pretty(&eval_json)?)?;
+    let table = report.to_table();
+    std::fs::write(dir.join("eval.txt"), &table)?;
+    if opts.render > 0 {
+        render_frames(loader.dataset(), &frames[..opts.render.min(frames.len())], &run.renders(split_name(opts.split)), cfg.eval.max_range)?;
+    }
+    Ok(InferOutput { dir, ap3d: [report.ap3d[0].ap, report.ap3d[1].ap, report.ap3d[2].ap], table, frames: frames.len() })
+}
+
+/// Writes frame results as pmunet JSON (`json/`), official detection txt (`kitti/`) and GT txt
+/// (`kitti_gt/`) under `dir`, plus PR CSV and PNG, and returns the report.
+pub fn write_results(frames: &[FrameResult], dir: &std::path::Path, protocol: &eval::Protocol) -> Result<eval::Report> {
+    let mut by_seq: BTreeMap<&str, DetectionFile> = BTreeMap::new();
+    for f in frames {
+        let file = by_seq.entry(&f.sequence).or_insert_with(|| DetectionFile { sequence: Some(f.sequence.clone()), detections: BTreeMap::new() });
+        file.detections.insert(f.name.clone(), f.detections.clone());
+    }
+    for (seq, file) in &by_seq {
+        write_detections(&dir.join("json").join(format!("{seq}.json")), file)?;
+    }
+    let eval_frames: Vec<eval::Frame> = frames.iter().map(FrameResult::to_eval_frame).collect();
+    eval::dataset::write_kitti_tree(&dir.join("kitti"), &eval_frames, FileKind::Detections)?;
+    eval::dataset::write_kitti_tree(&dir.join("kitti_gt"), &eval_frames, FileKind::GroundTruth)?;
+    let report = score(frames, protocol);
+    report.write_pr_csv(&dir.join("pr.csv"))?;
+    crate::plots::register_fonts();
+    eval::plot::plot_pr(&report, &dir.join("pr.png"))?;
+    Ok(report)
+}

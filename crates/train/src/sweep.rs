@@ -1,0 +1,350 @@
+//! Sweeps: a base config, variants (named overrides, or a grid over keys) and seeds; every
+//! (variant, seed) is one run folder; finished runs are skipped on a re-run and unfinished ones
+//! resumed; then `results.csv`, `results.md` and `curves.png` summarise the variants.
+//!
+//! ```toml
+//! name = "compare"                # sweep folder under out_dir (default: the file's stem)
+//! base = "../quickstart.toml"     # relative to this file
+//! out_dir = "runs"                # default "runs"
+//! seeds = [0, 1, 2]
+//! [set]                           # overrides for every variant (dotted keys, TOML values)
+//! "train.epochs" = 8
+//! [[variants]]                    # either named variants ...
+//! name = "minkunet"
+//! set = { "model.width" = 0.5 }
+//! [[variants]]
+//! name = "centerpoint"
+//! set = { model = { kind = "centerpoint", width = 0.25 } }   # a table replaces the whole table
+//! [grid]                          # ... or a grid: every combination of these values
+//! "model.epsilon" = [0.1, 0.2, 0.4]
+//! ```
+//!
+//! Layout: `<out_dir>/<name>/<variant>/seed-<s>/` (a run folder each), `results.csv`, `results.md`,
+//! `curves.png`. AP is the **last** validation of each run (no selection on the validation split);
+//! mean ± sample standard deviation (n − 1) over seeds.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use serde::{Deserialize, Serialize};
+
+use crate::config::{RunConfig, set_key};
+use crate::metrics::Table;
+use crate::plots::{Scale, Series, plot_lines};
+use crate::run_dir::{RunDir, write_atomic};
+use crate::trainer::TrainSummary;
+
+/// A sweep file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SweepConfig {
+    /// Folder name of the sweep (default: the file's stem).
+    #[serde(default)]
+    pub name: Option<String>,
+    /// The base run config, relative to the sweep file.
+    pub base: PathBuf,
+    /// Parent of the sweep folder.
+    #[serde(default = "default_out")]
+    pub out_dir: PathBuf,
+    /// Seeds every variant runs with.
+    #[serde(default = "default_seeds")]
+    pub seeds: Vec<u64>,
+    /// Overrides for every variant.
+    #[serde(default)]
+    pub set: BTreeMap<String, toml::Value>,
+    /// Named variants.
+    #[serde(default)]
+    pub variants: Vec<Variant>,
+    /// A grid: every combination of these keys' values.
+    #[serde(default)]
+    pub grid: BTreeMap<String, Vec<toml::Value>>,
+}
+
+fn default_out() -> PathBuf {
+    PathBuf::from("runs")
+}
+fn default_seeds() -> Vec<u64> {
+    vec![0]
+}
+
+/// A named set of overrides.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Variant {
+    /// Name (its folder).
+    pub name: String,
+    /// Dotted key → value.
+    #[serde(default)]
+    pub set: BTreeMap<String, toml::Value>,
+}
+
+/// One run of a sweep.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Job {
+    /// Variant name.
+    pub variant: String,
+    /// Seed.
+    pub seed: u64,
+    /// Resolved config.
+    pub config: RunConfig,
+    /// Its run folder.
+    pub dir: PathBuf,
+}
+
+impl SweepConfig {
+    /// Reads a sweep file.
+    pub fn load(path: &Path) -> Result<(Self, PathBuf)> {
+        let text = std::fs::read_to_string(path).with_context(|| format!("reading sweep {}", path.display()))?;
+        let mut cfg: SweepConfig = toml::from_str(&text).map_err(|e| anyhow::anyhow!("{e}")).with_context(|| format!("in sweep {}", path.display()))?;
+        if cfg.name.is_none() {
+            cfg.name = path.file_stem().map(|s| s.to_string_lossy().into_owned());
+        }
+        let base = path.parent().unwrap_or(Path::new(".")).join(&cfg.base);
+        Ok((cfg, base))
+    }
+
+    /// The variants: the named ones, or every grid combination (a single `base` variant if neither).
+    pub fn variants(&self) -> Result<Vec<Variant>> {
+        if !self.variants.is_empty() && !self.grid.is_empty() {
+            bail!("a sweep has either [[variants]] or [grid], not both");
+        }
+        if !self.variants.is_empty() {
+            let mut names: Vec<&str> = self.variants.iter().map(|v| v.name.as_str()).collect();
+            names.sort_unstable();
+            names.dedup();
+            if names.len() != self.variants.len() {
+                bail!("variant names must be unique");
+            }
+            return Ok(self.variants.clone());
+        }
+        if self.grid.is_empty() {
+            return Ok(vec![Variant { name: "base".into(), set: BTreeMap::new() }]);
+        }
+        let mut combos: Vec<Vec<(String, toml::Value)>> = vec![vec![]];
+        for (k, values) in &self.grid {
+            if values.is_empty() {
+                bail!("grid key `{k}` has no values");
+            }
+            combos = combos.into_iter().flat_map(|c| values.iter().map(move |v| [c.clone(), vec![(k.clone(), v.clone())]].concat())).collect();
+        }
+        Ok(combos
+            .into_iter()
+            .map(|c| Variant { name: c.iter().map(|(k, v)| format!("{}={}", k.rsplit('.').next().unwrap_or(k), value_name(v))).collect::<Vec<_>>().join(","), set: c.into_iter().collect() })
+            .collect())
+    }
+
+    /// The sweep's folder.
+    pub fn dir(&self) -> PathBuf {
+        self.out_dir.join(self.name.as_deref().unwrap_or("sweep"))
+    }
+
+    /// Every (variant, seed) run with its resolved config.
+    pub fn jobs(&self, base: &Path) -> Result<Vec<Job>> {
+        let text = std::fs::read_to_string(base).with_context(|| format!("reading base config {}", base.display()))?;
+        let base_value: toml::Value = toml::from_str(&text).with_context(|| format!("parsing {}", base.display()))?;
+        let mut jobs = Vec::new();
+        for v in self.variants()? {
+            for &seed in &self.seeds {
+                let mut value = base_value.clone();
+                for (k, x) in self.set.iter().chain(&v.set) {
+                    set_key(&mut value, k, x.clone())?;
+                }
+                set_key(&mut value, "seed", toml::Value::Integer(seed as i64))?;
+                set_key(&mut value, "name", toml::Value::String(format!("seed-{seed}")))?;
+                let dir = self.dir().join(&v.name).join(format!("seed-{seed}"));
+                set_key(&mut value, "out_dir", toml::Value::String(self.dir().join(&v.name).to_string_lossy().into_owned()))?;
+                let config = RunConfig::from_toml_value(value).with_context(|| format!("variant `{}`", v.name))?;
+                jobs.push(Job { variant: v.name.clone(), seed, config, dir });
+            }
+        }
+        Ok(jobs)
+    }
+}
+
+fn value_name(v: &toml::Value) -> String {
+    match v {
+        toml::Value::String(s) => s.clone(),
+        toml::Value::Array(a) => a.iter().map(value_name).collect::<Vec<_>>().join("x"),
+        other => other.to_string(),
+    }
+}
+
+/// A finished run's summary, if the run is finished.
+pub fn finished(dir: &Path) -> Option<TrainSummary> {
+    let text = std::fs::read_to_string(RunDir::at(dir).summary_json()).ok()?;
+    let s: TrainSummary = serde_json::from_str(&text).ok()?;
+    s.finished.then_some(s)
+}
+
+/// Runs every job not finished yet with `run_job` (which trains into `job.dir`, resuming what is
+/// there), then writes the results. A failed job is reported and the others still run.
+pub fn run_sweep(sweep: &SweepConfig, jobs: &[Job], mut run_job: impl FnMut(&Job) -> Result<TrainSummary>, verbose: bool) -> Result<SweepResults> {
+    std::fs::create_dir_all(sweep.dir())?;
+    let mut failures = Vec::new();
+    for (i, job) in jobs.iter().enumerate() {
+        if finished(&job.dir).is_some() {
+            if verbose {
+                eprintln!("[{}/{}] {} seed {}: finished before, skipped", i + 1, jobs.len(), job.variant, job.seed);
+            }
+            continue;
+        }
+        if verbose {
+            eprintln!("[{}/{}] {} seed {} → {}", i + 1, jobs.len(), job.variant, job.seed, job.dir.display());
+        }
+        if let Err(e) = run_job(job) {
+            eprintln!("{} seed {} failed: {e:#}", job.variant, job.seed);
+            failures.push(format!("{} seed {}: {e:#}", job.variant, job.seed));
+        }
+    }
+    let results = aggregate(jobs);
+    results.write(&sweep.dir())?;
+    if !failures.is_empty() {
+        bail!("{} of {} runs failed:\n{}", failures.len(), jobs.len(), failures.join("\n"));
+    }
+    Ok(results)
+}
+
+/// Mean and sample standard deviation (n − 1; 0 for one value).
+pub fn mean_std(xs: &[f64]) -> (f64, f64) {
+    let n = xs.len() as f64;
+    if xs.is_empty() {
+        return (f64::NAN, f64::NAN);
+    }
+    let m = xs.iter().sum::<f64>() / n;
+    let s = if xs.len() > 1 { (xs.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt() } else { 0.0 };
+    (m, s)
+}
+
+/// One variant's aggregate over its finished seeds.
+#[derive(Debug, Clone, PartialEq)]
+pub struct VariantResult {
+    /// Variant name.
+    pub variant: String,
+    /// Model kind.
+    pub model: String,
+    /// Seeds finished / planned.
+    pub done: usize,
+    /// Seeds planned.
+    pub planned: usize,
+    /// AP3D at 0.3/0.5/0.7: (mean, std) over finished seeds.
+    pub ap3d: [(f64, f64); 3],
+    /// Training time, seconds: (mean, std).
+    pub train_seconds: (f64, f64),
+    /// Parameters.
+    pub params: usize,
+    /// Validation AP3D@0.3 per epoch, averaged over finished seeds: (epoch, mean).
+    pub curve: Vec<(f64, f64)>,
+}
+
+/// All variants' results.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SweepResults {
+    /// In variant order.
+    pub variants: Vec<VariantResult>,
+}
+
+/// Aggregates the finished runs of `jobs` per variant.
+pub fn aggregate(jobs: &[Job]) -> SweepResults {
+    let mut order: Vec<&str> = Vec::new();
+    for j in jobs {
+        if !order.contains(&j.variant.as_str()) {
+            order.push(&j.variant);
+        }
+    }
+    let variants = order
+        .into_iter()
+        .map(|v| {
+            let mine: Vec<&Job> = jobs.iter().filter(|j| j.variant == v).collect();
+            let done: Vec<(TrainSummary, &Job)> = mine.iter().filter_map(|j| finished(&j.dir).map(|s| (s, *j))).collect();
+            let ap3d = [0, 1, 2].map(|i| mean_std(&done.iter().filter_map(|(s, _)| s.last_ap3d.map(|a| a[i])).collect::<Vec<_>>()));
+            let mut curves: BTreeMap<i64, Vec<f64>> = BTreeMap::new();
+            for (_, j) in &done {
+                if let Ok(t) = Table::read(&RunDir::at(&j.dir).epochs_csv()) {
+                    let (e, a) = (t.column("epoch").unwrap_or_default(), t.column("ap3d_0.3").unwrap_or_default());
+                    for (e, a) in e.into_iter().zip(a).filter(|(_, a)| a.is_finite()) {
+                        curves.entry(e as i64).or_default().push(a);
+                    }
+                }
+            }
+            VariantResult {
+                variant: v.to_string(),
+                model: mine[0].config.model.kind().to_string(),
+                done: done.len(),
+                planned: mine.len(),
+                ap3d,
+                train_seconds: mean_std(&done.iter().map(|(s, _)| s.train_seconds).collect::<Vec<_>>()),
+                params: done.first().map_or(0, |(s, _)| s.params),
+                curve: curves.into_iter().map(|(e, a)| (e as f64, mean_std(&a).0)).collect(),
+            }
+        })
+        .collect();
+    SweepResults { variants }
+}
+
+impl SweepResults {
+    /// The CSV text (AP as fractions, seconds).
+    pub fn to_csv(&self) -> Result<String> {
+        let mut w = csv::Writer::from_writer(Vec::new());
+        w.write_record([
+            "variant", "model", "seeds_done", "seeds", "ap3d_0.3_mean", "ap3d_0.3_std", "ap3d_0.5_mean", "ap3d_0.5_std", "ap3d_0.7_mean", "ap3d_0.7_std", "train_seconds_mean",
+            "train_seconds_std", "params",
+        ])?;
+        for v in &self.variants {
+            let mut row = vec![v.variant.clone(), v.model.clone(), v.done.to_string(), v.planned.to_string()];
+            for (m, s) in v.ap3d {
+                row.extend([format!("{m}"), format!("{s}")]);
+            }
+            row.extend([format!("{}", v.train_seconds.0), format!("{}", v.train_seconds.1), v.params.to_string()]);
+            w.write_record(&row)?;
+        }
+        Ok(String::from_utf8(w.into_inner().map_err(|e| anyhow::anyhow!("{e}"))?)?)
+    }
+
+    /// The Markdown table (AP in %, mean ± std over seeds).
+    pub fn to_markdown(&self) -> String {
+        let mut s = String::from("| variant | model | seeds | AP3D@0.3 (%) | AP3D@0.5 (%) | AP3D@0.7 (%) | train time | params |\n|---|---|---|---|---|---|---|---|\n");
+        for v in &self.variants {
+            let ap = |i: usize| if v.done == 0 { "–".to_string() } else { format!("{:.1} ± {:.1}", 100.0 * v.ap3d[i].0, 100.0 * v.ap3d[i].1) };
+            let t = if v.done == 0 { "–".to_string() } else { format!("{:.0} ± {:.0} s", v.train_seconds.0, v.train_seconds.1) };
+            s.push_str(&format!("| {} | {} | {}/{} | {} | {} | {} | {} | {} |\n", v.variant, v.model, v.done, v.planned, ap(0), ap(1), ap(2), t, v.params));
+        }
+        s
+    }
+
+    /// Writes `results.csv`, `results.md` and `curves.png` into `dir`.
+    pub fn write(&self, dir: &Path) -> Result<()> {
+        write_atomic(&dir.join("results.csv"), self.to_csv()?.as_bytes())?;
+        write_atomic(&dir.join("results.md"), self.to_markdown().as_bytes())?;
+        let series: Vec<Series> =
+            self.variants.iter().map(|v| Series { label: v.variant.clone(), points: v.curve.iter().map(|&(e, a)| (e, 100.0 * a)).collect() }).collect();
+        if let Err(e) = plot_lines(&dir.join("curves.png"), "validation AP3D@0.3 (mean over seeds)", "epoch", "AP3D@0.3 (%)", &series, Scale::Linear) {
+            eprintln!("warning: curves.png not drawn: {e:#}");
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn mean_and_sample_std() {
+        let (m, s) = mean_std(&[1.0, 2.0, 3.0]);
+        assert!((m - 2.0).abs() < 1e-12 && (s - 1.0).abs() < 1e-12);
+        assert_eq!(mean_std(&[0.5]), (0.5, 0.0));
+        assert!(mean_std(&[]).0.is_nan());
+    }
+
+    #[test]
+    fn grid_expands_to_every_combination() {
+        let s: SweepConfig = toml::from_str("base = \"b.toml\"\n[grid]\n\"model.width\" = [0.5, 1.0]\n\"data.voxel_size\" = [[0.05, 0.05, 0.1], [0.1, 0.1, 0.1]]\n").unwrap();
+        let v = s.variants().unwrap();
+        assert_eq!(v.len(), 4);
+        assert!(v.iter().all(|x| x.set.len() == 2));
+        let names: Vec<&str> = v.iter().map(|x| x.name.as_str()).collect();
+        assert!(names.contains(&"voxel_size=0.05x0.05x0.1,width=0.5"), "{names:?}");
+        assert!(toml::from_str::<SweepConfig>("base = \"b\"\nvariant = []\n").is_err(), "unknown keys are refused");
+    }
+}

@@ -1,0 +1,128 @@
+//! Validation: detections for every frame of a split, scored with the official JRDB protocol
+//! (`eval`), AP3D at IoU 0.3 / 0.5 / 0.7.
+
+use std::time::Instant;
+
+use anyhow::Result;
+use burn::tensor::Device;
+use data_jrdb::{Box3d, Loader};
+use eval::jrdb::{Detection, detections_to_kitti};
+use eval::kitti::KittiObject;
+use eval::{Frame, Protocol, Report};
+use indicatif::ProgressBar;
+use model::Detector;
+
+use crate::progress;
+
+/// One frame's ground truth and detections.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FrameResult {
+    /// Sequence name.
+    pub sequence: String,
+    /// Frame name (`000123`).
+    pub name: String,
+    /// Pedestrian boxes (base frame).
+    pub gt: Vec<Box3d>,
+    /// `num_points` of each GT box.
+    pub num_points: Vec<i64>,
+    /// Detections, best first.
+    pub detections: Vec<Detection>,
+}
+
+impl FrameResult {
+    /// The evaluator's frame: GT as the official converter writes it, detections as KITTI lines.
+    pub fn to_eval_frame(&self) -> Frame {
+        let gt = self
+            .gt
+            .iter()
+            .zip(&self.num_points)
+            .map(|(b, &n)| {
+                let mut k = KittiObject::from_box3d(b, n.clamp(i32::MIN as i64, i32::MAX as i64) as i32, 1.0);
+                // As the official converter without 2D labels.
+                k.truncated = -1;
+                k.occluded = -1;
+                k
+            })
+            .collect();
+        Frame { sequence: self.sequence.clone(), name: self.name.clone(), gt, det: detections_to_kitti(&self.detections) }
+    }
+}
+
+/// The outcome of one validation.
+#[derive(Debug, Clone)]
+pub struct Validation {
+    /// AP3D at IoU 0.3, 0.5, 0.7 (fractions in [0, 1]).
+    pub ap3d: [f64; 3],
+    /// The whole report (APBEV, per-sequence AP, counts, PR curves).
+    pub report: Report,
+    /// Per-frame results, in split order.
+    pub frames: Vec<FrameResult>,
+    /// Wall time, seconds.
+    pub seconds: f64,
+}
+
+/// Runs `model` (in eval mode: pass `model.valid()`) over every batch of `loader`'s epoch 0 on
+/// `device` (a plain, non-autodiff device).
+pub fn detect_split<D: Detector>(model: &D, loader: &Loader, device: &Device, show_progress: bool) -> Result<Vec<FrameResult>> {
+    let pb = if show_progress { progress::bar(loader.dataset().len() as u64, "detect") } else { ProgressBar::hidden() };
+    let mut out = Vec::with_capacity(loader.dataset().len());
+    for batch in loader.epoch(0) {
+        let batch = batch?;
+        let dets = model.detect(&batch, device);
+        anyhow::ensure!(dets.len() == batch.len(), "the model returned {} detection lists for a batch of {}", dets.len(), batch.len());
+        for (b, d) in dets.into_iter().enumerate() {
+            let (sequence, name) = batch.frames[b].clone();
+            let detections = d.boxes.iter().zip(&d.scores).map(|(bb, &s)| Detection { bbox: *bb, score: s as f64 }).collect();
+            out.push(FrameResult { sequence, name, gt: batch.boxes[b].clone(), num_points: batch.num_points[b].clone(), detections });
+        }
+        pb.inc(batch.len() as u64);
+    }
+    pb.finish_and_clear();
+    Ok(out)
+}
+
+/// Scores frame results under `protocol`.
+pub fn score(frames: &[FrameResult], protocol: &Protocol) -> Report {
+    let eval_frames: Vec<Frame> = frames.iter().map(FrameResult::to_eval_frame).collect();
+    Report::compute(&eval_frames, protocol)
+}
+
+/// Detects and scores a split.
+pub fn validate<D: Detector>(model: &D, loader: &Loader, device: &Device, protocol: &Protocol, show_progress: bool) -> Result<Validation> {
+    let t0 = Instant::now();
+    let frames = detect_split(model, loader, device, show_progress)?;
+    let report = score(&frames, protocol);
+    let ap3d = [report.ap3d[0].ap, report.ap3d[1].ap, report.ap3d[2].ap];
+    Ok(Validation { ap3d, report, frames, seconds: t0.elapsed().as_secs_f64() })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn perfect_detections_score_one_and_none_score_zero() {
+        let b = Box3d { cx: 5.0, cy: 1.0, cz: 0.1, l: 0.9, w: 0.5, h: 1.7, rot_z: 0.3 };
+        let far = Box3d { cx: 40.0, ..b };
+        let mk = |dets: Vec<Detection>| FrameResult {
+            sequence: "s".into(),
+            name: "000000".into(),
+            gt: vec![b, far],
+            num_points: vec![50, 50],
+            detections: dets,
+        };
+        let p = Protocol::official();
+        // The official 40-recall-point AP needs many GT to reach 1 (one GT gives one threshold).
+        let many = |f: &dyn Fn(usize) -> Vec<Detection>| -> Vec<FrameResult> {
+            (0..50).map(|i| FrameResult { name: format!("{i:06}"), ..mk(f(i)) }).collect()
+        };
+        let r = score(&many(&|i| vec![Detection { bbox: b, score: 0.5 + i as f64 / 100.0 }]), &p);
+        assert!((r.ap3d[0].ap - 1.0).abs() < 1e-9 && (r.ap3d[2].ap - 1.0).abs() < 1e-9, "{}", r.ap3d[0].ap);
+        assert_eq!(r.counts.gt, 50, "the GT beyond 25 m is ignored");
+        let r = score(&many(&|_| vec![]), &p);
+        assert_eq!(r.ap3d[0].ap, 0.0);
+        let shifted = Box3d { cx: 5.3, ..b };
+        let r = score(&many(&|i| vec![Detection { bbox: shifted, score: 0.5 + i as f64 / 100.0 }]), &p);
+        assert!(r.ap3d[0].ap > 0.9 && r.ap3d[2].ap < 0.1, "{:?}", [r.ap3d[0].ap, r.ap3d[2].ap]);
+    }
+}

@@ -1,0 +1,130 @@
+//! End to end through the binary (as users run it): data generation, training, validation,
+//! checkpoints, plots, inference and scoring; and resume against an uninterrupted run.
+
+use std::path::Path;
+use std::process::Command;
+
+use train::metrics::Table;
+
+fn tiny_config(dir: &Path, data: &Path, extra: &str) -> std::path::PathBuf {
+    let text = format!(
+        r#"seed = 3
+backend = "flex"
+threads = 2
+[data]
+root = "{}"
+voxel_size = [0.1, 0.1, 0.1]
+max_voxels = 4000
+prefetch = false
+[data.simulate]
+sequences = 2
+frames = 4
+seed = 1
+max_people = 8
+[model]
+kind = "person_minkunet"
+width = 0.125
+[train]
+batch_size = 1
+[train.schedule]
+kind = "exp_decay"
+lr0 = 1e-3
+epoch0 = 1.0
+lr1 = 1e-4
+epoch1 = 3.0
+[eval]
+frame_stride = 2
+{extra}
+"#,
+        data.display()
+    );
+    let p = dir.join("cfg.toml");
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+fn train_bin(args: &[&str]) -> std::process::Output {
+    let out = Command::new(env!("CARGO_BIN_EXE_train")).args(args).env("NO_COLOR", "1").output().expect("runs");
+    if !out.status.success() {
+        panic!("train {args:?} failed:\n{}\n{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    }
+    out
+}
+
+#[test]
+fn smoke_generate_train_validate_checkpoint_infer() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = tmp.path().join("data");
+    let cfg = tiny_config(tmp.path(), &data, "");
+    // `train.epochs` defaults to 40: stop after 2 with --max-epochs (validation runs at the stop).
+    let runs = tmp.path().join("runs");
+    train_bin(&["--config", cfg.to_str().unwrap(), "--out", runs.to_str().unwrap(), "--name", "smoke", "--max-epochs", "2", "--quiet"]);
+    assert!(data.join("pointclouds").is_dir(), "the simulated dataset was generated");
+    let run = runs.join("smoke");
+    for f in ["config.toml", "metrics.csv", "epochs.csv", "summary.json", "plots/steps.png", "plots/epochs.png", "checkpoints/latest", "checkpoints/best"] {
+        assert!(run.join(f).exists(), "{f} missing");
+    }
+    let resolved = std::fs::read_to_string(run.join("config.toml")).unwrap();
+    assert!(resolved.contains("epochs = 40") && resolved.contains("amsgrad = true"), "{resolved}");
+    let m = Table::read(&run.join("metrics.csv")).unwrap();
+    assert!(m.rows.len() >= 2);
+    assert!(m.col("cls").is_some() || m.header.len() > 6, "loss terms are columns: {:?}", m.header);
+    assert!(m.column("loss").unwrap().iter().all(|v| v.is_finite()));
+    let e = Table::read(&run.join("epochs.csv")).unwrap();
+    assert_eq!(e.column("epoch").unwrap(), vec![1.0, 2.0]);
+    let ap = e.column("ap3d_0.3").unwrap();
+    assert!(ap[1].is_finite() && (0.0..=1.0).contains(&ap[1]), "validated at the stop: {ap:?}");
+    // A second plain invocation refuses to overwrite the run.
+    let again = Command::new(env!("CARGO_BIN_EXE_train")).args(["--config", cfg.to_str().unwrap(), "--out", runs.to_str().unwrap(), "--name", "smoke", "--quiet"]).output().unwrap();
+    assert!(!again.status.success() && String::from_utf8_lossy(&again.stderr).contains("--resume"));
+
+    let out = train_bin(&["infer", "--run", run.to_str().unwrap(), "--split", "val", "--render", "1"]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("frames"), "{text}");
+    let det = run.join("detections/val");
+    let json: Vec<_> = std::fs::read_dir(det.join("json")).unwrap().collect();
+    assert!(!json.is_empty());
+    assert!(det.join("kitti").is_dir() && det.join("kitti_gt").is_dir() && det.join("eval.json").exists());
+    let eval: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(det.join("eval.json")).unwrap()).unwrap();
+    assert!(eval.to_string().contains("0.3"), "{eval}");
+    let pngs: Vec<_> = std::fs::read_dir(run.join("render/val")).unwrap().collect();
+    assert_eq!(pngs.len(), 1);
+}
+
+#[test]
+fn resumed_run_continues_exactly() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = tmp.path().join("data");
+    // No validation before the last epoch; checkpoints at epoch ends and at the stop.
+    let cfg = tiny_config(tmp.path(), &data, "");
+    let cfg = cfg.to_str().unwrap();
+    let runs = tmp.path().join("runs");
+    let runs = runs.to_str().unwrap();
+    let set = ["--set", "train.epochs=3", "--set", "train.val_every=0", "--quiet"];
+    let args = |name: &'static str, steps: &'static str| {
+        let mut a = vec!["--config", cfg, "--out", runs, "--name", name, "--max-steps", steps];
+        a.extend(set);
+        a
+    };
+    train_bin(&args("whole", "5"));
+    train_bin(&args("split", "2"));
+    let mut resume = args("split", "5");
+    resume.push("--resume");
+    train_bin(&resume);
+    let whole = Table::read(&Path::new(runs).join("whole/metrics.csv")).unwrap();
+    let split = Table::read(&Path::new(runs).join("split/metrics.csv")).unwrap();
+    assert_eq!(whole.header, split.header);
+    assert_eq!(whole.rows.len(), 5);
+    assert_eq!(split.rows.len(), 5, "rows of the resumed run: steps 1-2 then 3-5");
+    let skip = ["seconds", "time"];
+    for (a, b) in whole.rows.iter().zip(&split.rows) {
+        for (i, h) in whole.header.iter().enumerate() {
+            if skip.contains(&h.as_str()) {
+                continue;
+            }
+            assert!((a[i] - b[i]).abs() <= 1e-6 * a[i].abs().max(1e-6), "column {h}: {} vs {} at step {}", a[i], b[i], a[0]);
+        }
+    }
+    // The data of both runs spans an epoch boundary (2 train frames per epoch at batch 1).
+    assert!(whole.column("epoch").unwrap().iter().any(|&e| e >= 1.0));
+}

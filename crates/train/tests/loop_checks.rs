@@ -1,0 +1,167 @@
+//! The training loop with a test detector (so these checks do not depend on a real model's
+//! numerics): a non-finite loss stops the run naming the step and keeps the last good checkpoint;
+//! sweep bookkeeping skips finished runs and aggregates seeds.
+
+use std::path::Path;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use burn::module::{Module, Param};
+use burn::tensor::{Device, Tensor, TensorData};
+use data_jrdb::Batch;
+use model::{Detections, Detector, LossTerms};
+use train::checkpoint::{Checkpoints, Slot};
+use train::metrics::Table;
+use train::sweep::{SweepConfig, aggregate, finished, run_sweep};
+use train::{Existing, RunConfig, RunDir, TrainOptions, TrainSummary, train_model};
+
+/// A one-parameter "detector": loss = (w − 1)² per batch; from call `nan_from` on, the loss is NaN.
+#[derive(Module, Debug)]
+struct Toy {
+    w: Param<Tensor<1>>,
+    #[module(skip)]
+    calls: Arc<AtomicUsize>,
+    #[module(skip)]
+    nan_from: usize,
+}
+
+impl Detector for Toy {
+    fn loss(&self, _batch: &Batch, _device: &Device) -> LossTerms {
+        let k = self.calls.fetch_add(1, Ordering::SeqCst) + 1;
+        let d = self.w.val() - 1.0;
+        let mut total = d.clone() * d;
+        if k >= self.nan_from {
+            total = total.mul_scalar(f32::NAN);
+        }
+        LossTerms { total: total.clone(), terms: vec![("sq", total)] }
+    }
+
+    fn head_output(&self, _batch: &Batch, _device: &Device) -> Vec<f32> {
+        self.w.val().into_data().try_to_vec::<f32>().expect("f32 parameter")
+    }
+
+    fn detect(&self, batch: &Batch, _device: &Device) -> Vec<Detections> {
+        vec![Detections::default(); batch.len()]
+    }
+}
+
+fn config(dir: &Path, extra: &str) -> RunConfig {
+    let text = format!(
+        "seed = 1\n[data]\nroot = \"{}\"\nvoxel_size = [0.2, 0.2, 0.2]\nprefetch = false\n[data.simulate]\nsequences = 2\nframes = 3\nmax_people = 4\n[model]\nkind = \"person_minkunet\"\n[train]\nbatch_size = 1\nepochs = 3\ncheckpoint_every = 1\n{extra}",
+        dir.join("data").display()
+    );
+    RunConfig::from_toml_str(&text).unwrap()
+}
+
+#[test]
+fn non_finite_loss_names_the_step_and_keeps_the_last_good_checkpoint() {
+    let tmp = tempfile::tempdir().unwrap();
+    let cfg = config(tmp.path(), "");
+    let run = RunDir::create(tmp.path().join("run"), &cfg, Existing::Refuse).unwrap();
+    let device = Device::flex();
+    let ad = device.clone().autodiff();
+    let toy = Toy { w: Param::from_tensor(Tensor::from_data(TensorData::from([3.0f32]), &ad)), calls: Arc::new(AtomicUsize::new(0)), nan_from: 3 };
+    let opts = TrainOptions { verbose: false, ..Default::default() };
+    let err = train_model(toy, &cfg, &run, &opts, &device).expect_err("NaN must stop the run").to_string();
+    assert!(err.contains("non-finite loss at step 3"), "{err}");
+    let latest = Checkpoints::new(run.checkpoints()).get(Slot::Latest).unwrap().expect("a checkpoint from step 2");
+    let state = latest.read_state().unwrap();
+    assert_eq!(state.step, 2, "the checkpoint is the last good step");
+    let m = Table::read(&run.metrics_csv()).unwrap();
+    assert_eq!(m.rows.len(), 2);
+    let loss = m.column("loss").unwrap();
+    assert!(loss[1] < loss[0], "Adam moved w toward 1: {loss:?}");
+    assert!(!run.summary_json().exists(), "a failed run is not finished");
+}
+
+#[test]
+fn toy_run_trains_and_checkpoints_atomically() {
+    let tmp = tempfile::tempdir().unwrap();
+    let cfg = config(tmp.path(), "val_every = 0\n[train.schedule]\nkind = \"constant\"\nlr = 0.1\n");
+    let run = RunDir::create(tmp.path().join("run"), &cfg, Existing::Refuse).unwrap();
+    let device = Device::flex();
+    let ad = device.clone().autodiff();
+    let toy = Toy { w: Param::from_tensor(Tensor::from_data(TensorData::from([3.0f32]), &ad)), calls: Arc::new(AtomicUsize::new(0)), nan_from: usize::MAX };
+    let s = train_model(toy, &cfg, &run, &TrainOptions::default(), &device).unwrap();
+    assert!(s.finished && s.epochs == 3);
+    // 1 train sequence × 3 frames, batch 1.
+    assert_eq!(s.steps, 9);
+    let m = Table::read(&run.metrics_csv()).unwrap();
+    assert_eq!(m.column("step").unwrap(), (1..=9).map(f64::from).collect::<Vec<_>>());
+    let loss = m.column("sq").unwrap();
+    assert!(loss.windows(2).all(|w| w[1] < w[0]) && loss[8] < 0.5 * loss[0], "Adam at lr 0.1 moves w toward 1: {loss:?}");
+    let e = Table::read(&run.epochs_csv()).unwrap();
+    assert_eq!(e.rows.len(), 3);
+    assert!(e.column("ap3d_0.3").unwrap()[..2].iter().all(|v| v.is_nan()), "val_every = 0: only the last epoch is validated");
+    assert!(e.column("ap3d_0.3").unwrap()[2].is_finite());
+    // Only the folders the pointers name are kept, no temporaries.
+    let names: Vec<String> = std::fs::read_dir(run.checkpoints()).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    assert!(names.iter().all(|n| !n.ends_with(".tmp")), "{names:?}");
+    assert!(names.iter().filter(|n| n.starts_with("step-")).count() <= 2, "{names:?}");
+}
+
+fn fake_summary(dir: &Path, ap: f64, finished: bool) -> TrainSummary {
+    std::fs::create_dir_all(dir).unwrap();
+    let s = TrainSummary {
+        name: "x".into(),
+        model: "person_minkunet".into(),
+        params: 42,
+        steps: 10,
+        epochs: 2,
+        finished,
+        last_ap3d: Some([ap, ap / 2.0, ap / 4.0]),
+        last_epoch: Some(2),
+        best_ap3d_03: Some((ap, 2)),
+        train_seconds: 5.0,
+    };
+    std::fs::write(dir.join("summary.json"), serde_json::to_string(&s).unwrap()).unwrap();
+    std::fs::write(dir.join("epochs.csv"), format!("epoch,ap3d_0.3\n1,{}\n2,{ap}\n", ap / 2.0)).unwrap();
+    s
+}
+
+#[test]
+fn sweep_skips_finished_runs_and_aggregates_seeds() {
+    let tmp = tempfile::tempdir().unwrap();
+    std::fs::write(tmp.path().join("base.toml"), "[model]\nkind = \"person_minkunet\"\n").unwrap();
+    let sweep_text = format!(
+        "base = \"base.toml\"\nout_dir = \"{}\"\nseeds = [0, 1]\n[set]\n\"train.epochs\" = 2\n[[variants]]\nname = \"a\"\nset = {{ \"model.width\" = 0.5 }}\n[[variants]]\nname = \"b\"\nset = {{ model = {{ kind = \"centerpoint\" }} }}\n",
+        tmp.path().join("runs").display()
+    );
+    std::fs::write(tmp.path().join("s.toml"), sweep_text).unwrap();
+    let (sweep, base) = SweepConfig::load(&tmp.path().join("s.toml")).unwrap();
+    let jobs = sweep.jobs(&base).unwrap();
+    assert_eq!(jobs.len(), 4);
+    assert_eq!(jobs[0].config.train.epochs, 2);
+    assert_eq!(jobs[3].config.model.kind(), "centerpoint");
+    assert_eq!((jobs[1].variant.as_str(), jobs[1].seed, jobs[1].config.seed), ("a", 1, 1));
+    // Variant b seed 1 finished in an earlier invocation; a seed 1 was interrupted.
+    fake_summary(&jobs[3].dir, 0.9, true);
+    fake_summary(&jobs[1].dir, 0.0, false);
+    let mut ran = Vec::new();
+    let results = run_sweep(
+        &sweep,
+        &jobs,
+        |j| {
+            ran.push((j.variant.clone(), j.seed));
+            Ok(fake_summary(&j.dir, if j.variant == "a" { 0.4 + 0.2 * j.seed as f64 } else { 0.7 }, true))
+        },
+        false,
+    )
+    .unwrap();
+    assert_eq!(ran, vec![("a".into(), 0), ("a".into(), 1), ("b".into(), 0)]);
+    let a = &results.variants[0];
+    assert_eq!((a.done, a.planned), (2, 2));
+    assert!((a.ap3d[0].0 - 0.5).abs() < 1e-12 && (a.ap3d[0].1 - 0.02f64.sqrt()).abs() < 1e-12, "{:?}", a.ap3d[0]);
+    let b = &results.variants[1];
+    assert!((b.ap3d[0].0 - 0.8).abs() < 1e-12, "mean of the skipped run (0.9) and the new one (0.7)");
+    assert_eq!(b.curve.len(), 2);
+    assert!((b.curve[0].1 - 0.4).abs() < 1e-12 && (b.curve[1].1 - 0.8).abs() < 1e-12, "{:?}", b.curve);
+    let md = std::fs::read_to_string(sweep.dir().join("results.md")).unwrap();
+    assert!(md.contains("| a | person_minkunet | 2/2 | 50.0 ± 14.1 |"), "{md}");
+    assert!(sweep.dir().join("results.csv").exists() && sweep.dir().join("curves.png").exists());
+    // A re-run has nothing left to do.
+    let again = run_sweep(&sweep, &jobs, |_| panic!("every run is finished"), false).unwrap();
+    assert_eq!(again, results);
+    assert!(jobs.iter().all(|j| finished(&j.dir).is_some()));
+    assert_eq!(aggregate(&jobs), results);
+}
