@@ -47,7 +47,7 @@ pub fn tensor3(values: &[f64], shape: [usize; 3], device: &Device, dtype: DType)
 }
 
 pub fn values<const D: usize>(t: Tensor<D>) -> Vec<f64> {
-    t.into_data().convert::<f64>().to_vec::<f64>().unwrap()
+    t.into_data().convert::<f64>().try_to_vec::<f64>().unwrap()
 }
 
 pub fn assert_close(actual: &[f64], expected: &[f64], tol: f64, what: &str) {
