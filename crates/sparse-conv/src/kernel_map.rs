@@ -75,7 +75,9 @@ pub struct KernelMap {
     n_in: usize,
     n_out: usize,
     out_table: Arc<NeighborTable>,
-    in_table: Arc<NeighborTable>,
+    /// Built with the map for down maps; for submanifold maps it is the mirror of `out_table`,
+    /// made only if something asks (the kernels run on `pairs`).
+    in_table: OnceLock<Arc<NeighborTable>>,
     pairs: OnceLock<OffsetPairs>,
 }
 
@@ -118,7 +120,11 @@ impl KernelMap {
 
     /// For each input row, its output row at each offset.
     pub fn in_table(&self) -> &NeighborTable {
-        &self.in_table
+        self.in_table_arc()
+    }
+
+    fn in_table_arc(&self) -> &Arc<NeighborTable> {
+        self.in_table.get_or_init(|| Arc::new(mirror(&self.out_table)))
     }
 
     /// The offset whose pairs are `(r, r)` for every row (the submanifold centre), if any.
@@ -173,8 +179,8 @@ impl KernelMap {
             kind,
             n_in: self.n_out,
             n_out: self.n_in,
-            out_table: self.in_table.clone(),
-            in_table: self.out_table.clone(),
+            out_table: self.in_table_arc().clone(),
+            in_table: OnceLock::from(self.out_table.clone()),
             pairs: OnceLock::new(),
         }
     }
@@ -211,13 +217,12 @@ impl KernelMap {
                 }
             }
         }
-        let in_table = mirror(&table);
         KernelMap {
             kind: MapKind::Submanifold { kernel },
             n_in: n,
             n_out: n,
             out_table: Arc::new(table),
-            in_table: Arc::new(in_table),
+            in_table: OnceLock::new(),
             pairs: OnceLock::new(),
         }
     }
@@ -265,7 +270,7 @@ impl KernelMap {
             n_in: coords.len(),
             n_out: out_coords.len(),
             out_table: Arc::new(out_table),
-            in_table: Arc::new(in_table),
+            in_table: OnceLock::from(Arc::new(in_table)),
             pairs: OnceLock::new(),
         };
         Ok((map, out_coords))
