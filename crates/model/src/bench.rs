@@ -70,7 +70,7 @@ pub struct BenchReport {
     pub runs: usize,
 }
 
-pub use sparse_conv::timing::{median_ms, peak_rss_mb as peak_rss_mib};
+pub use sparse_conv::timing::{median_ms, peak_rss_mb};
 
 /// Times `model` (built on `device.autodiff()`) on `batch`; inference runs on its `valid()` copy.
 fn measure<M: Detector>(
@@ -88,7 +88,7 @@ fn measure<M: Detector>(
     let detect_ms = median_ms(0, runs.min(3), || {
         std::hint::black_box(eval.detect(batch, &inner));
     });
-    let peak_forward = peak_rss_mib();
+    let peak_forward = peak_rss_mb();
     drop(eval);
     let mut optim = AdamConfig::new().init();
     let mut step = || {
@@ -97,7 +97,7 @@ fn measure<M: Detector>(
         model = optim.step(1e-3, model.clone(), grads);
     };
     let train_ms = median_ms(warmup, runs, &mut step);
-    (forward_ms, detect_ms, train_ms, peak_forward, peak_rss_mib())
+    (forward_ms, detect_ms, train_ms, peak_forward, peak_rss_mb())
 }
 
 /// Benchmarks the model of `cfg` on `batch` on `device` (a plain device; training uses its

@@ -29,7 +29,7 @@ use crate::kernel_map::KernelMap;
 pub trait SparseConvBackend: Backend {
     /// `out[o] = Σ_k Σ_{(i, o) ∈ M_k} x[i] · W_k`.
     fn sparse_conv(features: FloatTensor<Self>, weight: FloatTensor<Self>, map: Arc<KernelMap>) -> FloatTensor<Self> {
-        let (pairs, n_out) = (map.pairs(), map.n_out());
+        let n_out = map.n_out();
         let c_out = weight.shape()[2];
         let device = features.device();
         let mut out = Self::float_zeros(Shape::new([n_out, c_out]), &device, features.dtype().into());
@@ -40,7 +40,6 @@ pub trait SparseConvBackend: Backend {
             let product = Self::float_matmul(gathered, w_k);
             out = Self::float_select_assign(out, 0, output, product, IndexingUpdateOp::Add);
         }
-        let _ = pairs;
         out
     }
 

@@ -145,6 +145,12 @@ impl CoordIndex {
     }
 }
 
+impl fmt::Debug for CoordIndex {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("CoordIndex").field("capacity", &self.keys.len()).finish()
+    }
+}
+
 /// Checks that `coords` are valid for a sparse tensor: in range and without duplicates.
 pub fn validate(coords: &[Coord]) -> Result<(), CoordError> {
     CoordIndex::build(coords).map(|_| ())

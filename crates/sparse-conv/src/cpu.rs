@@ -69,8 +69,11 @@ pub fn weight_grad<T: Element>(
 ) -> Vec<T> {
     let volume = pairs.start.len() - 1;
     let block = c_in * c_out;
+    // Chunks are listed offset by offset; `first_chunk[k]..first_chunk[k + 1]` are offset k's.
     let mut chunks = Vec::new();
+    let mut first_chunk = Vec::with_capacity(volume + 1);
     for k in 0..volume {
+        first_chunk.push(chunks.len());
         let (s, e) = (pairs.start[k], pairs.start[k + 1]);
         let mut a = s;
         while a < e {
@@ -79,6 +82,7 @@ pub fn weight_grad<T: Element>(
             a = b;
         }
     }
+    first_chunk.push(chunks.len());
     let mut partials = vec![T::ZERO; chunks.len() * block];
     if block > 0 {
         partials.par_chunks_mut(block).zip(chunks.par_iter()).for_each_init(
@@ -109,11 +113,9 @@ pub fn weight_grad<T: Element>(
     let mut grad = vec![T::ZERO; volume * block];
     if block > 0 {
         grad.par_chunks_mut(block).enumerate().for_each(|(k, dst)| {
-            for (c, &(ck, _, _)) in chunks.iter().enumerate() {
-                if ck == k {
-                    for (d, &p) in dst.iter_mut().zip(&partials[c * block..(c + 1) * block]) {
-                        *d += p;
-                    }
+            for partial in partials[first_chunk[k] * block..first_chunk[k + 1] * block].chunks_exact(block) {
+                for (d, &p) in dst.iter_mut().zip(partial) {
+                    *d += p;
                 }
             }
         });

@@ -149,6 +149,11 @@ impl SparseTensor {
         (map, coords, fine)
     }
 
+    /// The cache shared by every tensor of this forward pass.
+    pub fn cache(&self) -> &Arc<MapCache> {
+        &self.cache
+    }
+
     /// A tensor on another level of the same cache.
     pub(crate) fn on_level(&self, features: Tensor<2>, coords: Arc<[Coord]>, stride: i32) -> Self {
         Self { features, coords, stride, cache: self.cache.clone() }
@@ -166,12 +171,6 @@ struct CacheState {
     levels: HashMap<i32, Arc<[Coord]>>,
     indexes: HashMap<i32, Arc<CoordIndex>>,
     maps: HashMap<(MapKind, i32), Arc<KernelMap>>,
-}
-
-impl std::fmt::Debug for CoordIndex {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str("CoordIndex")
-    }
 }
 
 impl MapCache {
@@ -198,12 +197,5 @@ impl MapCache {
     /// Number of kernel maps built so far.
     pub fn num_maps(&self) -> usize {
         self.state.lock().unwrap().maps.len()
-    }
-}
-
-impl SparseTensor {
-    /// The cache shared by every tensor of this forward pass.
-    pub fn cache(&self) -> &Arc<MapCache> {
-        &self.cache
     }
 }
