@@ -109,10 +109,12 @@ trait HostFloats: Backend {
 
 impl HostFloats for Flex {
     fn host_f32(t: &FloatTensor<Self>) -> Cow<'_, [f32]> {
-        t.as_slice::<f32>().map_or_else(|| Cow::Owned(t.to_contiguous().storage::<f32>().to_vec()), Cow::Borrowed)
+        // A strided view (e.g. the broadcast seed of a `sum` backward) is laid out once, and
+        // its buffer taken over rather than copied again.
+        t.as_slice::<f32>().map_or_else(|| Cow::Owned(t.to_contiguous().into_data().into_vec::<f32>().expect("an f32 tensor")), Cow::Borrowed)
     }
     fn host_f64(t: &FloatTensor<Self>) -> Cow<'_, [f64]> {
-        t.as_slice::<f64>().map_or_else(|| Cow::Owned(t.to_contiguous().storage::<f64>().to_vec()), Cow::Borrowed)
+        t.as_slice::<f64>().map_or_else(|| Cow::Owned(t.to_contiguous().into_data().into_vec::<f64>().expect("an f64 tensor")), Cow::Borrowed)
     }
 }
 

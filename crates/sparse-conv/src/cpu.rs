@@ -55,6 +55,58 @@ impl Element for f64 {
     const ONE: f64 = 1.0;
 }
 
+/// Largest `m·k + k·n` of one GEMM call that matrixmultiply 0.3 runs on the calling thread: from
+/// `2^15` on (its `threading.rs` heuristic, with the `threading` feature Burn turns on) it spreads
+/// the product over threads of its own, which inside our rayon tasks oversubscribes the cores
+/// (measured: the weight gradient 5× slower). [`serial_gemm`] cuts products below it.
+const SERIAL_GEMM_SIZE: usize = (1 << 15) - 1;
+
+/// `C = A·B + beta·C` (strided, as [`Element::gemm`]) on the calling thread only: cut along `k`
+/// (accumulating) and `m` into calls below [`SERIAL_GEMM_SIZE`]. The cut depends only on the
+/// shape, so the summation order, and the result, are the same at any thread count.
+///
+/// # Safety
+/// As [`Element::gemm`].
+#[allow(clippy::too_many_arguments)]
+pub unsafe fn serial_gemm<T: Element>(
+    m: usize, k: usize, n: usize,
+    a: *const T, rsa: isize, csa: isize,
+    b: *const T, rsb: isize, csb: isize,
+    beta: T, c: *mut T, rsc: isize, csc: isize,
+) {
+    // matrixmultiply works on k in blocks of 256 anyway. Keep all m rows in one call down to
+    // k = 64, then cut m into equal pieces (never a thin remainder).
+    let rows_for = |kt: usize| (SERIAL_GEMM_SIZE / kt).saturating_sub(n);
+    let mut kt = k.clamp(1, 256);
+    while kt > 64 && rows_for(kt) < m {
+        kt /= 2;
+    }
+    while kt > 8 && rows_for(kt) < m.min(16) {
+        kt /= 2;
+    }
+    let pieces = m.div_ceil(rows_for(kt).max(1)).max(1);
+    let mt = m.div_ceil(pieces).max(1);
+    for k0 in (0..k).step_by(kt) {
+        let kk = kt.min(k - k0);
+        let beta = if k0 == 0 { beta } else { T::ONE };
+        for m0 in (0..m).step_by(mt) {
+            let mm = mt.min(m - m0);
+            unsafe {
+                T::gemm(
+                    mm, kk, n,
+                    a.offset(m0 as isize * rsa + k0 as isize * csa), rsa, csa,
+                    b.offset(k0 as isize * rsb), rsb, csb,
+                    beta, c.offset(m0 as isize * rsc), rsc, csc,
+                );
+            }
+        }
+    }
+    if k == 0 {
+        // matrixmultiply scales C by beta for an empty k; keep that contract.
+        unsafe { T::gemm(m, 0, n, a, rsa, csa, b, rsb, csb, beta, c, rsc, csc) };
+    }
+}
+
 /// `dW_k = Σ_{(i, o) ∈ M_k} x[i]ᵀ · g[o]`, as `[K, C_in, C_out]`.
 ///
 /// Each offset's pairs are cut into fixed chunks whose partial products are summed in chunk order;
@@ -93,7 +145,7 @@ pub fn weight_grad<T: Element>(
                     // The centre pairs are (r, r) for r = 0.. in order: read the rows in place.
                     let r = a - pairs.start[k];
                     unsafe {
-                        T::gemm(c_in, m, c_out, x[r * c_in..].as_ptr(), 1, c_in as isize, grad_out[r * c_out..].as_ptr(), c_out as isize, 1, T::ZERO, partial.as_mut_ptr(), c_out as isize, 1);
+                        serial_gemm(c_in, m, c_out, x[r * c_in..].as_ptr(), 1, c_in as isize, grad_out[r * c_out..].as_ptr(), c_out as isize, 1, T::ZERO, partial.as_mut_ptr(), c_out as isize, 1);
                     }
                     return;
                 }
@@ -105,7 +157,7 @@ pub fn weight_grad<T: Element>(
                 }
                 // (c_in × m) · (m × c_out): the gathered inputs read transposed through strides.
                 unsafe {
-                    T::gemm(c_in, m, c_out, xs.as_ptr(), 1, c_in as isize, gs.as_ptr(), c_out as isize, 1, T::ZERO, partial.as_mut_ptr(), c_out as isize, 1);
+                    serial_gemm(c_in, m, c_out, xs.as_ptr(), 1, c_in as isize, gs.as_ptr(), c_out as isize, 1, T::ZERO, partial.as_mut_ptr(), c_out as isize, 1);
                 }
             },
         );
@@ -177,7 +229,7 @@ pub fn pair_conv<T: Element>(
         out.par_chunks_mut(CHUNK_ROWS * c_dst).zip(src.par_chunks(CHUNK_ROWS * c_src)).for_each(|(dst, rows)| {
             let m = rows.len() / c_src.max(1);
             unsafe {
-                T::gemm(m, c_src, c_dst, rows.as_ptr(), c_src as isize, 1, w.as_ptr(), rsb, csb, T::ZERO, dst.as_mut_ptr(), c_dst as isize, 1);
+                serial_gemm(m, c_src, c_dst, rows.as_ptr(), c_src as isize, 1, w.as_ptr(), rsb, csb, T::ZERO, dst.as_mut_ptr(), c_dst as isize, 1);
             }
         });
     }
@@ -201,7 +253,7 @@ pub fn pair_conv<T: Element>(
                     gathered[j * c_src..(j + 1) * c_src].copy_from_slice(&src[r * c_src..(r + 1) * c_src]);
                 }
                 unsafe {
-                    T::gemm(m, c_src, c_dst, gathered.as_ptr(), c_src as isize, 1, w.as_ptr(), rsb, csb, T::ZERO, product.as_mut_ptr(), c_dst as isize, 1);
+                    serial_gemm(m, c_src, c_dst, gathered.as_ptr(), c_src as isize, 1, w.as_ptr(), rsb, csb, T::ZERO, product.as_mut_ptr(), c_dst as isize, 1);
                 }
                 for (j, &r) in scatter_side[a..b].iter().enumerate() {
                     // SAFETY: within offset k each destination row appears once, so no two tasks
@@ -215,4 +267,30 @@ pub fn pair_conv<T: Element>(
         );
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The cut product equals a naive triple loop, for shapes that cut k, m or both, with strided
+    /// (transposed) operands and an accumulating beta.
+    #[test]
+    fn serial_gemm_matches_a_naive_product() {
+        for &(m, k, n) in &[(5, 3, 4), (32, 2048, 32), (256, 128, 128), (700, 600, 300), (1, 1000, 900), (64, 0, 8)] {
+            let a: Vec<f64> = (0..m * k).map(|i| ((i * 37 % 101) as f64 - 50.0) / 50.0).collect();
+            let b: Vec<f64> = (0..k * n).map(|i| ((i * 53 % 97) as f64 - 48.0) / 48.0).collect();
+            let c0: Vec<f64> = (0..m * n).map(|i| (i % 7) as f64).collect();
+            // A is read transposed: stored k×m.
+            let at: Vec<f64> = (0..k * m).map(|i| a[(i % m) * k + i / m]).collect();
+            let mut c = c0.clone();
+            unsafe { serial_gemm(m, k, n, at.as_ptr(), 1, m as isize, b.as_ptr(), n as isize, 1, 0.5, c.as_mut_ptr(), n as isize, 1) };
+            for i in 0..m {
+                for j in 0..n {
+                    let want = 0.5 * c0[i * n + j] + (0..k).map(|l| a[i * k + l] * b[l * n + j]).sum::<f64>();
+                    assert!((c[i * n + j] - want).abs() < 1e-9, "({m}, {k}, {n}) at ({i}, {j}): {} vs {want}", c[i * n + j]);
+                }
+            }
+        }
+    }
 }

@@ -10,6 +10,7 @@ use clap::{Parser, ValueEnum};
 use serde::Serialize;
 use sparse_conv::burn::tensor::{Device, DeviceKind, Distribution, Tensor};
 use sparse_conv::timing::{median_ms, peak_rss_mb};
+use sparse_conv::cpu::{self, PairDirection};
 use sparse_conv::{CoordIndex, KernelMap, scene, sparse_conv};
 
 #[derive(Clone, Copy, Debug, ValueEnum, Serialize)]
@@ -46,9 +47,10 @@ struct Args {
     /// Untimed warm-up runs per figure.
     #[arg(long, default_value_t = 2)]
     warmup: usize,
-    /// Tile the scene this many times as extra batch samples.
-    #[arg(long, default_value_t = 1)]
-    scale: usize,
+    /// Tile the scene this many times as extra batch samples; a list (`1,2,4,8`) also prints how
+    /// the first channel count's times grow with the pairs.
+    #[arg(long, value_delimiter = ',', default_value = "1")]
+    scale: Vec<usize>,
     /// Print one JSON object instead of the table.
     #[arg(long)]
     json: bool,
@@ -62,6 +64,42 @@ struct Row {
     fwd_bwd_ms: f64,
     fwd_gflops: f64,
     fwd_bwd_gflops: f64,
+    /// The slice kernels alone (CPU backends): forward, feature gradient, weight gradient.
+    kernel: Option<KernelTimes>,
+}
+
+/// What the CPU kernels take by themselves, and what the Burn op adds around them (tensor
+/// conversions, allocation, autodiff bookkeeping, the `sum` seed of the backward).
+#[derive(Serialize)]
+struct KernelTimes {
+    fwd_ms: f64,
+    input_grad_ms: f64,
+    weight_grad_ms: f64,
+    /// `fwd_ms` of the op minus the forward kernel.
+    fwd_overhead_ms: f64,
+    /// `fwd_bwd_ms` of the op minus the three kernels.
+    fwd_bwd_overhead_ms: f64,
+}
+
+/// The scene tiled `scale` times, at the first channel count.
+#[derive(Serialize)]
+struct ScalePoint {
+    scale: usize,
+    voxels: usize,
+    pairs: usize,
+    fwd_ms: f64,
+    fwd_bwd_ms: f64,
+    /// fwd+bwd milliseconds per million pairs: flat when time is linear in the pairs.
+    fwd_bwd_ms_per_mpair: f64,
+}
+
+/// The GEMM the kernels call, on a square product split across the thread pool by row blocks:
+/// the ceiling the op's GFLOP/s are measured against.
+#[derive(Serialize)]
+struct GemmCeiling {
+    size: usize,
+    ms: f64,
+    gflops: f64,
 }
 
 /// The strided pair of the U-Net at one channel count: down k2s2 (its map built inside the timed
@@ -82,25 +120,31 @@ struct Report {
     kernel: usize,
     runs: usize,
     map_ms: f64,
+    sgemm: GemmCeiling,
     results: Vec<Row>,
     strided: Vec<Strided>,
+    scaling: Vec<ScalePoint>,
     peak_rss_mb: f64,
 }
 
 fn main() -> anyhow::Result<()> {
+    // The GEMM ceiling is measured like the kernels run: one single-threaded GEMM per rayon
+    // thread. matrixmultiply reads this once, at its first call, which comes later.
+    // SAFETY: no other thread exists yet.
+    unsafe { std::env::set_var("MATMUL_NUM_THREADS", "1") };
     let args = Args::parse();
     anyhow::ensure!(args.kernel % 2 == 1, "--kernel must be odd, got {}", args.kernel);
     anyhow::ensure!(args.runs >= 1, "--runs must be at least 1");
-    anyhow::ensure!(args.scale >= 1, "--scale must be at least 1");
+    anyhow::ensure!(args.scale.iter().all(|&s| s >= 1), "--scale must be at least 1");
     let pool = rayon::ThreadPoolBuilder::new().num_threads(args.threads).build_global();
     pool.context("configuring the thread pool")?;
     let threads = rayon::current_num_threads();
 
-    let coords = match &args.coords {
+    let scene_coords = match &args.coords {
         Some(path) => scene::read_npy_coords(path)?,
         None => scene::synthetic_lidar_scene(args.seed),
     };
-    let coords = scene::tile_as_batch(&coords, args.scale);
+    let coords = scene::tile_as_batch(&scene_coords, args.scale[0]);
     sparse_conv::coords::validate(&coords).context("scene coordinates")?;
     let device = match args.backend {
         Backend::Flex => Device::flex(),
@@ -119,29 +163,14 @@ fn main() -> anyhow::Result<()> {
     let map = Arc::new(KernelMap::submanifold(&coords, &index, args.kernel, 1));
     let pairs = map.num_pairs();
     let n = coords.len();
-    let volume = map.volume();
 
+    let cpu = matches!(args.backend, Backend::Flex | Backend::Ndarray);
+    let sgemm = gemm_ceiling(2048, args.warmup, args.runs.min(5));
     let mut results = Vec::new();
     for &c in &args.channels {
-        let x = Tensor::<2>::random([n, c], Distribution::Uniform(-1.0, 1.0), &device);
-        let w = Tensor::<3>::random([volume, c, c], Distribution::Uniform(-0.1, 0.1), &device);
-        let fwd_ms = median_ms(args.warmup, args.runs, || {
-            let out = sparse_conv(x.clone(), w.clone(), &map);
-            device.sync().expect("device sync");
-            std::hint::black_box(out);
-        });
-        let ad = device.clone().autodiff();
-        let xa = Tensor::<2>::random([n, c], Distribution::Uniform(-1.0, 1.0), &ad).require_grad();
-        let wa = Tensor::<3>::random([volume, c, c], Distribution::Uniform(-0.1, 0.1), &ad).require_grad();
-        let fwd_bwd_ms = median_ms(args.warmup, args.runs, || {
-            let out = sparse_conv(xa.clone(), wa.clone(), &map);
-            let grads = out.sum().backward();
-            let gx = xa.grad(&grads).expect("feature gradient");
-            let gw = wa.grad(&grads).expect("weight gradient");
-            ad.sync().expect("device sync");
-            std::hint::black_box((gx, gw));
-        });
+        let (fwd_ms, fwd_bwd_ms) = time_op(&device, &map, c, args.warmup, args.runs);
         let flop = 2.0 * pairs as f64 * c as f64 * c as f64;
+        let kernel = cpu.then(|| kernel_times(&map, c, args.warmup, args.runs, fwd_ms, fwd_bwd_ms));
         results.push(Row {
             c_in: c,
             c_out: c,
@@ -149,6 +178,7 @@ fn main() -> anyhow::Result<()> {
             fwd_bwd_ms,
             fwd_gflops: flop / fwd_ms / 1e6,
             fwd_bwd_gflops: 3.0 * flop / fwd_bwd_ms / 1e6,
+            kernel,
         });
     }
     let mut strided = Vec::new();
@@ -178,7 +208,31 @@ fn main() -> anyhow::Result<()> {
         });
         strided.push(Strided { channels: c, down_fwd_bwd_ms, up_fwd_bwd_ms });
     }
-    let report = Report { voxels: n, pairs, backend: args.backend, threads, kernel: args.kernel, runs: args.runs, map_ms, results, strided, peak_rss_mb: peak_rss_mb() };
+    let mut scaling = Vec::new();
+    if let (true, Some(&c)) = (args.scale.len() > 1, args.channels.first()) {
+        for &scale in &args.scale {
+            let coords = scene::tile_as_batch(&scene_coords, scale);
+            let index = CoordIndex::build(&coords)?;
+            let map = Arc::new(KernelMap::submanifold(&coords, &index, args.kernel, 1));
+            let (fwd_ms, fwd_bwd_ms) = time_op(&device, &map, c, args.warmup, args.runs);
+            let pairs = map.num_pairs();
+            scaling.push(ScalePoint { scale, voxels: coords.len(), pairs, fwd_ms, fwd_bwd_ms, fwd_bwd_ms_per_mpair: fwd_bwd_ms / (pairs as f64 / 1e6) });
+        }
+    }
+    let report = Report {
+        voxels: n,
+        pairs,
+        backend: args.backend,
+        threads,
+        kernel: args.kernel,
+        runs: args.runs,
+        map_ms,
+        sgemm,
+        results,
+        strided,
+        scaling,
+        peak_rss_mb: peak_rss_mb(),
+    };
     if args.json {
         println!("{}", serde_json::to_string(&report)?);
     } else {
@@ -187,12 +241,80 @@ fn main() -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Median forward and forward+backward of the op through Burn (the backward seeded by `sum`).
+fn time_op(device: &Device, map: &Arc<KernelMap>, c: usize, warmup: usize, runs: usize) -> (f64, f64) {
+    let (n, volume) = (map.n_in(), map.volume());
+    let x = Tensor::<2>::random([n, c], Distribution::Uniform(-1.0, 1.0), device);
+    let w = Tensor::<3>::random([volume, c, c], Distribution::Uniform(-0.1, 0.1), device);
+    let fwd_ms = median_ms(warmup, runs, || {
+        let out = sparse_conv(x.clone(), w.clone(), map);
+        device.sync().expect("device sync");
+        std::hint::black_box(out);
+    });
+    let ad = device.clone().autodiff();
+    let xa = Tensor::<2>::random([n, c], Distribution::Uniform(-1.0, 1.0), &ad).require_grad();
+    let wa = Tensor::<3>::random([volume, c, c], Distribution::Uniform(-0.1, 0.1), &ad).require_grad();
+    let fwd_bwd_ms = median_ms(warmup, runs, || {
+        let out = sparse_conv(xa.clone(), wa.clone(), map);
+        let grads = out.sum().backward();
+        let gx = xa.grad(&grads).expect("feature gradient");
+        let gw = wa.grad(&grads).expect("weight gradient");
+        ad.sync().expect("device sync");
+        std::hint::black_box((gx, gw));
+    });
+    (fwd_ms, fwd_bwd_ms)
+}
+
+/// The three slice kernels timed on plain vectors, and the op's time around them.
+fn kernel_times(map: &KernelMap, c: usize, warmup: usize, runs: usize, op_fwd_ms: f64, op_fwd_bwd_ms: f64) -> KernelTimes {
+    let (n, volume, pairs, centre) = (map.n_in(), map.volume(), map.pairs(), map.identity_offset());
+    let values = |len: usize, scale: f32| -> Vec<f32> { (0..len).map(|i| ((i * 7919 % 2001) as f32 / 1000.0 - 1.0) * scale).collect() };
+    let (x, w, g) = (values(n * c, 1.0), values(volume * c * c, 0.1), values(map.n_out() * c, 1.0));
+    let fwd_ms = median_ms(warmup, runs, || {
+        std::hint::black_box(cpu::pair_conv(&x, c, &w, c, map.n_out(), PairDirection::Forward, pairs, centre));
+    });
+    let input_grad_ms = median_ms(warmup, runs, || {
+        std::hint::black_box(cpu::pair_conv(&g, c, &w, c, n, PairDirection::Backward, pairs, centre));
+    });
+    let weight_grad_ms = median_ms(warmup, runs, || {
+        std::hint::black_box(cpu::weight_grad(&x, c, &g, c, pairs, centre));
+    });
+    KernelTimes {
+        fwd_ms,
+        input_grad_ms,
+        weight_grad_ms,
+        fwd_overhead_ms: op_fwd_ms - fwd_ms,
+        fwd_bwd_overhead_ms: op_fwd_bwd_ms - fwd_ms - input_grad_ms - weight_grad_ms,
+    }
+}
+
+/// `size³` SGEMM with the kernels' GEMM micro-kernel, one row block per rayon thread, each block
+/// on its own thread ([`cpu::serial_gemm`]'s cut would make a square product needlessly thin, so
+/// the blocks call matrixmultiply directly with its own threading off; see `main`).
+fn gemm_ceiling(size: usize, warmup: usize, runs: usize) -> GemmCeiling {
+    use rayon::prelude::*;
+    let a: Vec<f32> = (0..size * size).map(|i| (i % 13) as f32 * 0.01).collect();
+    let b: Vec<f32> = (0..size * size).map(|i| (i % 7) as f32 * 0.01).collect();
+    let mut c = vec![0.0f32; size * size];
+    let rows = size.div_ceil(rayon::current_num_threads());
+    let ms = median_ms(warmup, runs, || {
+        c.par_chunks_mut(rows * size).zip(a.par_chunks(rows * size)).for_each(|(c, a)| {
+            let m = a.len() / size;
+            // SAFETY: a is m×size, b size×size, c m×size, all row-major and in bounds.
+            unsafe { <f32 as cpu::Element>::gemm(m, size, size, a.as_ptr(), size as isize, 1, b.as_ptr(), size as isize, 1, 0.0, c.as_mut_ptr(), size as isize, 1) }
+        });
+        std::hint::black_box(&c);
+    });
+    GemmCeiling { size, ms, gflops: 2.0 * (size as f64).powi(3) / ms / 1e6 }
+}
+
 fn print_table(r: &Report) {
     println!(
         "backend {:?}, {} threads, {} voxels, {} pairs (k={}), median of {} runs",
         r.backend, r.threads, r.voxels, r.pairs, r.kernel, r.runs
     );
     println!("submanifold map build: {:.2} ms", r.map_ms);
+    println!("SGEMM ceiling ({0}×{0}×{0}, the kernels' GEMM): {1:.1} GFLOP/s", r.sgemm.size, r.sgemm.gflops);
     println!("{:>6} {:>6} {:>10} {:>10} {:>14} {:>10}", "C_in", "C_out", "fwd ms", "GFLOP/s", "fwd+bwd ms", "GFLOP/s");
     for row in &r.results {
         println!(
@@ -200,8 +322,21 @@ fn print_table(r: &Report) {
             row.c_in, row.c_out, row.fwd_ms, row.fwd_gflops, row.fwd_bwd_ms, row.fwd_bwd_gflops
         );
     }
+    for row in r.results.iter().filter(|row| row.kernel.is_some()) {
+        let k = row.kernel.as_ref().expect("filtered");
+        println!(
+            "  C={}: kernels fwd {:.2} / input grad {:.2} / weight grad {:.2} ms; outside the kernels: fwd {:.2}, fwd+bwd {:.2} ms",
+            row.c_in, k.fwd_ms, k.input_grad_ms, k.weight_grad_ms, k.fwd_overhead_ms, k.fwd_bwd_overhead_ms
+        );
+    }
     for s in &r.strided {
         println!("down k2s2 C={} fwd+bwd (map included): {:.2} ms; up (transposed) fwd+bwd: {:.2} ms", s.channels, s.down_fwd_bwd_ms, s.up_fwd_bwd_ms);
+    }
+    for p in &r.scaling {
+        println!(
+            "scale {}×: {} voxels, {} pairs, fwd {:.2} ms, fwd+bwd {:.2} ms ({:.1} ms per million pairs)",
+            p.scale, p.voxels, p.pairs, p.fwd_ms, p.fwd_bwd_ms, p.fwd_bwd_ms_per_mpair
+        );
     }
     println!("peak memory (RSS): {:.0} MiB", r.peak_rss_mb);
 }
