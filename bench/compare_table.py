@@ -1,0 +1,283 @@
+#!/usr/bin/env python3
+"""Builds the side-by-side markdown table of one `bench/compare_spconv.sh` results folder.
+
+    python3 bench/compare_table.py RESULTS_DIR
+
+Reads (whichever are there) from RESULTS_DIR:
+  spconv.json                        bench/peer_spconv.py --json
+  pmunet_conv_<backend>.json         cargo run -p sparse-conv --bin sparse-conv-bench -- ... --json
+  pmunet_model_<backend>_b1.json     cargo run -p model --bin model-bench -- ... --batch 1 --json
+  pmunet_model_<backend>_b2.json     cargo run -p model --bin model-bench -- ... --batch 2 --json
+  <name>.rc                          exit status of each step (absent: the step was not run)
+  <name>.log                         its stderr
+  meta.txt                           key=value lines written by compare_spconv.sh
+prints the table (plus a few context lines and notes) and writes it to RESULTS_DIR/table.md.
+Standard library only.
+"""
+import json
+import os
+import sys
+
+BACKENDS = ("flex", "ndarray")
+TIME_TARGET = 1.5  # the issue's target: pmunet time <= spconv time / 1.5
+MEM_TARGET = 1.0  # and pmunet peak memory <= spconv's
+
+
+class Missing:
+    """Why a cell has no number: 'skipped' (step not run), 'failed' (step ran, no JSON), 'n/a'
+    (the step's JSON has no such field)."""
+
+    def __init__(self, why):
+        self.why = why
+
+    def __str__(self):
+        return self.why
+
+
+def load(folder, name):
+    """The last JSON object printed to RESULTS_DIR/name.json, or a Missing."""
+    rc_path = os.path.join(folder, name + ".rc")
+    path = os.path.join(folder, name + ".json")
+    if not os.path.exists(rc_path) and not os.path.exists(path):
+        return Missing("skipped")
+    rc = None
+    if os.path.exists(rc_path):
+        with open(rc_path) as fh:
+            text = fh.read().strip()
+        rc = int(text) if text.lstrip("-").isdigit() else None
+    try:
+        with open(path) as fh:
+            text = fh.read()
+    except OSError:
+        return Missing("failed")
+    if rc not in (None, 0):
+        return Missing("failed")
+    # The peer writes one indented document; the Rust benches print one object on a line.
+    try:
+        return json.loads(text)
+    except ValueError:
+        pass
+    for line in reversed(text.splitlines()):
+        line = line.strip()
+        if line.startswith("{"):
+            try:
+                return json.loads(line)
+            except ValueError:
+                continue
+    return Missing("failed")
+
+
+def get(doc, *path):
+    """doc[path[0]][path[1]]...; a list step is a (key, value) pair selecting the matching item."""
+    if isinstance(doc, Missing):
+        return doc
+    cur = doc
+    for step in path:
+        if isinstance(step, tuple):
+            key, want = step
+            found = [item for item in cur if isinstance(item, dict) and item.get(key) == want] if isinstance(cur, list) else []
+            if not found:
+                return Missing("n/a")
+            cur = found[0]
+        elif isinstance(cur, dict) and step in cur:
+            cur = cur[step]
+        else:
+            return Missing("n/a")
+    if cur is None:
+        return Missing("n/a")
+    return cur
+
+
+def read_meta(folder):
+    meta = {}
+    path = os.path.join(folder, "meta.txt")
+    if os.path.exists(path):
+        with open(path) as fh:
+            for line in fh:
+                if "=" in line:
+                    k, v = line.rstrip("\n").split("=", 1)
+                    meta[k.strip()] = v.strip()
+    return meta
+
+
+def num(v, unit):
+    if isinstance(v, Missing):
+        return str(v)
+    if unit == "MiB":
+        return f"{v:,.0f}"
+    if unit == "GFLOP/s":
+        return f"{v:.1f}"
+    return f"{v:,.2f}" if v < 100 else f"{v:,.1f}"
+
+
+def main():
+    if len(sys.argv) != 2:
+        raise SystemExit(__doc__)
+    folder = sys.argv[1]
+    meta = read_meta(folder)
+    peer = load(folder, "spconv")
+    conv = {b: load(folder, f"pmunet_conv_{b}") for b in BACKENDS}
+    model1 = {b: load(folder, f"pmunet_model_{b}_b1") for b in BACKENDS}
+    model2 = {b: load(folder, f"pmunet_model_{b}_b2") for b in BACKENDS}
+    threads = meta.get("threads") or str(get(peer, "threads"))
+
+    def part(name):
+        """The peer's document where it ran part `name`, else why not."""
+        if isinstance(peer, Missing):
+            return peer
+        return peer if name in peer.get("parts", [name]) else Missing("skipped")
+
+    # (label, unit, kind, spconv value, {backend: pmunet value}); kind: time | mem | rate
+    rows = [("subm k3 kernel-map build", "ms", "time", get(part("convs"), "convs", "subm_map", "median_ms"),
+             {b: get(conv[b], "map_ms") for b in BACKENDS})]
+    for c in (32, 64, 128):
+        for key, label, field in (("fwd", "fwd", "fwd_ms"), ("fwd_bwd", "fwd+bwd", "fwd_bwd_ms")):
+            rows.append((f"subm k3 C{c} {label}", "ms", "time", get(part("convs"), "convs", "subm", str(c), key, "median_ms"),
+                         {b: get(conv[b], "results", ("c_in", c), field) for b in BACKENDS}))
+    rows.append(("down k2s2 C64 fwd+bwd (map incl.)", "ms", "time",
+                 get(part("convs"), "convs", "down_k2s2_c64_fwd_bwd_incl_map", "median_ms"),
+                 {b: get(conv[b], "strided", ("channels", 64), "down_fwd_bwd_ms") for b in BACKENDS}))
+    rows.append(("up k2 C64 fwd+bwd", "ms", "time", get(part("convs"), "convs", "up_k2_c64_fwd_bwd", "median_ms"),
+                 {b: get(conv[b], "strided", ("channels", 64), "up_fwd_bwd_ms") for b in BACKENDS}))
+    rows.append(("MinkUNet inference, 1 frame", "ms", "time", get(part("minkunet"), "minkunet", "infer", "infer_b1", "median_ms"),
+                 {b: get(model1[b], "forward_ms") for b in BACKENDS}))
+    rows.append(("MinkUNet training step, batch 2", "ms", "time",
+                 get(part("minkunet"), "minkunet", "train", "train_b2", "median_ms"),
+                 {b: get(model2[b], "train_step_ms") for b in BACKENDS}))
+    rows.append(("peak memory (RSS) of the training step, batch 2", "MiB", "mem",
+                 get(part("minkunet"), "minkunet", "train", "peak_rss_mib"),
+                 {b: get(model2[b], "peak_train_mib") for b in BACKENDS}))
+    # sparse-conv-bench's `sgemm` object ({size, ms, gflops}: the GEMM its kernels call) where it
+    # prints one; older builds print none (n/a).
+    rows.append(("SGEMM ceiling, 2048³ matmul", "GFLOP/s", "rate", get(part("gemm"), "gemm", "gflops_median"),
+                 {b: get(conv[b], "sgemm", "gflops") for b in BACKENDS}))
+
+    def ratio(kind, s, p):
+        if isinstance(s, Missing) or isinstance(p, Missing) or not p:
+            return None
+        return s / p
+
+    def met(kind, r):
+        if r is None or kind == "rate":
+            return "—"
+        return "yes" if r >= (TIME_TARGET if kind == "time" else MEM_TARGET) else "no"
+
+    lines = []
+    header = ["figure", "spconv 2.3.8", "pmunet flex", "pmunet ndarray", "spconv/flex", "spconv/ndarray",
+              "target", "met (flex / ndarray)"]
+    lines.append("| " + " | ".join(header) + " |")
+    lines.append("|" + "---|" * len(header))
+    for label, unit, kind, s, p in rows:
+        ratios = {b: ratio(kind, s, p[b]) for b in BACKENDS}
+        target = {"time": f"spconv/pmunet ≥ {TIME_TARGET}", "mem": "pmunet ≤ spconv", "rate": "—"}[kind]
+        cells = [f"{label} ({unit})", num(s, unit)] + [num(p[b], unit) for b in BACKENDS]
+        cells += [f"{ratios[b]:.2f}" if ratios[b] is not None else "—" for b in BACKENDS]
+        cells += [target, " / ".join(met(kind, ratios[b]) for b in BACKENDS) if kind != "rate" else "—"]
+        lines.append("| " + " | ".join(cells) + " |")
+
+    cc = get(part("crosscheck"), "crosscheck")
+    if isinstance(cc, Missing):
+        cc_cell = str(cc)
+        cc_threads = threads
+    else:
+        per = ", ".join(str(r["rows_wrong"]) for r in cc["repeats"])
+        cc_cell = (f"{cc['rows_wrong_max']:,} of {cc['rows']:,} rows (repeats: {per}; max abs err "
+                   f"{cc['max_abs_err']:.3g})")
+        cc_threads = cc["threads"]
+    lines.append(f"| spconv SubMConv3d C32 rows wrong (> 1e-3) at {cc_threads} threads, vs torch gather–matmul–scatter "
+                 f"| {cc_cell} | n/a | n/a | — | — | 0 rows | — |")
+    table = "\n".join(lines)
+
+    # context and notes
+    ctx = []
+    scene = meta.get("scene") or get(peer, "scene", "path")
+    ctx.append(f"Scene {scene}; {threads} threads; convs: median of {meta.get('runs', get(peer, 'runs'))} runs after "
+               f"{meta.get('warmup', get(peer, 'warmup'))} warm-ups; "
+               + ("MinkUNet skipped; " if meta.get("quick") == "1" else
+                  f"MinkUNet: median of {meta.get('model_runs', '?')} after {meta.get('model_warmup', '?')} warm-ups; ")
+               + f"{meta.get('date', '')} on "
+               f"{get(peer, 'env', 'cpu')} ({get(peer, 'env', 'nproc')} CPUs).")
+    if meta.get("quick") == "1":
+        ctx.append("QUICK RUN (--quick): few runs, MinkUNet skipped — a test of the scripts, not a measurement.")
+    notes = []
+    warn = []
+    pv = get(peer, "scene", "voxels")
+    pp = get(part("convs"), "convs", "subm_pairs")
+    for b in BACKENDS:
+        for name, doc in ((f"sparse-conv-bench {b}", conv[b]), (f"model-bench {b} b1", model1[b]),
+                          (f"model-bench {b} b2", model2[b])):
+            t = get(doc, "threads")
+            if not isinstance(t, Missing) and str(t) != str(threads):
+                warn.append(f"{name} ran on {t} threads, not {threads}.")
+        gs = get(conv[b], "sgemm", "size")
+        if not isinstance(gs, Missing) and gs != 2048:
+            warn.append(f"pmunet {b}'s SGEMM ceiling is a {gs}³ product, spconv's 2048³.")
+        cv, cp = get(conv[b], "voxels"), get(conv[b], "pairs")
+        if not isinstance(cv, Missing) and not isinstance(pv, Missing) and cv != pv:
+            warn.append(f"voxel count differs: spconv {pv}, pmunet {b} {cv}.")
+        if not isinstance(cp, Missing) and not isinstance(pp, Missing) and cp != pp:
+            warn.append(f"subm k3 pairs differ: spconv {pp}, pmunet {b} {cp}.")
+    if not isinstance(pv, Missing):
+        notes.append(f"{pv:,} voxels, subm k3 map {pp:,} pairs (spconv)" +
+                     "".join(f"; pmunet {b}: {get(conv[b], 'voxels')} voxels, {get(conv[b], 'pairs')} pairs"
+                             for b in BACKENDS if not isinstance(conv[b], Missing)) + ".")
+    sp_params = get(part("minkunet"), "minkunet", "params")
+    pm_params = {b: get(model2[b], "parameters") for b in BACKENDS}
+    if not isinstance(sp_params, Missing) or any(not isinstance(v, Missing) for v in pm_params.values()):
+        notes.append("MinkUNet parameters: spconv " + str(sp_params) +
+                     "".join(f", pmunet {b} {pm_params[b]}" for b in BACKENDS) + ".")
+    notes += [
+        "Times are medians in ms; spconv's min per figure is in spconv.json (pmunet's benches report medians only). "
+        "Ratio = spconv / pmunet: above 1 pmunet is faster (or, for memory, smaller).",
+        f"Target (the issue's): pmunet time ≤ spconv time / {TIME_TARGET} (ratio ≥ {TIME_TARGET}); "
+        "pmunet peak memory ≤ spconv's (ratio ≥ 1).",
+        "spconv 'fwd' rows reuse a cached kernel map, as pmunet's do; 'down' builds its map inside the timed call; "
+        "'up' reuses the down map. MinkUNet rebuilds every map on every call on both sides.",
+        "MinkUNet: spconv's inference is a batch-1 process (eval, no grad) and its training step a batch-2 process "
+        "(loss = mean of squared head outputs, Adam); pmunet's inference figure is model-bench --batch 1 "
+        "forward_ms, its training step and peak are model-bench --batch 2 train_step_ms / peak_train_mib "
+        "(pmunet's loss is the detector loss on a frame without boxes). Peak RSS is each process's own "
+        "(spconv: ru_maxrss of the training subprocess, which includes ~0.47 GiB from importing torch and building the model, rss_before_mib in spconv.json; "
+        "pmunet: VmHWM, after its batch-2 inference and training runs).",
+        "SGEMM (higher is better, no target): spconv's cell is torch.matmul (MKL) of 2048³ at the same "
+        "thread count; pmunet's is sparse-conv-bench's `sgemm.gflops` (the GEMM its kernels call), n/a where "
+        "the build prints none.",
+        "spconv 2.3.8's CPU SubMConv3d races at > 1 thread: the last row counts wrong output rows in 3 repeats "
+        "(it varies from call to call and can be 0), so spconv's multi-thread conv timings come from an "
+        "implementation that can return wrong rows.",
+    ]
+    for key in ("load_before",):  # load after includes this run itself
+        try:
+            load1 = float(meta.get(key, "").split()[0])
+        except (ValueError, IndexError):
+            continue
+        if load1 > 0.5:
+            warn.append(f"the machine was busy ({key.replace('_', ' ')} the run: load average {load1:.2f}): "
+                        "other processes skew these figures, spconv's OpenMP threads far more than pmunet's rayon "
+                        "pool (2-thread spconv convs were seen 30-100x slower beside one busy process).")
+    for name in sorted(os.listdir(folder)):
+        if name.endswith(".log") and name.startswith("pmunet_"):
+            with open(os.path.join(folder, name), errors="replace") as fh:
+                if any(l.lstrip().startswith("Compiling ") for l in fh):
+                    warn.append(f"cargo compiled something before {name[:-4]} ran (see {name}).")
+    for name, doc in [("spconv", peer)] + [(f"pmunet_conv_{b}", conv[b]) for b in BACKENDS] + \
+            [(f"pmunet_model_{b}_b{k}", d[b]) for b in BACKENDS for k, d in ((1, model1), (2, model2))]:
+        if isinstance(doc, Missing) and doc.why == "failed":
+            warn.append(f"{name} failed: see {name}.log.")
+    if not isinstance(peer, Missing):
+        for sub in ("infer", "train"):
+            err = get(part("minkunet"), "minkunet", sub, "error")
+            if not isinstance(err, Missing):
+                warn.append(f"spconv MinkUNet {sub} subprocess failed ({err}).")
+
+    text = "\n".join(ctx) + "\n\n" + table + "\n\n" + "\n".join(f"* {n}" for n in notes)
+    if warn:
+        text += "\n\n" + "\n".join(f"**Warning:** {w}" for w in warn)
+    text += "\n"
+    with open(os.path.join(folder, "table.md"), "w") as fh:
+        fh.write(text)
+    print(text, end="")
+
+
+if __name__ == "__main__":
+    main()
