@@ -211,9 +211,11 @@ pub fn pair_conv<T: Element>(
 ) -> Vec<T> {
     let volume = pairs.start.len() - 1;
     assert_eq!(weight.len(), volume * c_src * c_dst, "weight does not match the map and channels");
-    let mut out = vec![T::ZERO; n_dst * c_dst];
     if n_dst == 0 || c_dst == 0 {
-        return out;
+        return vec![T::ZERO; n_dst * c_dst];
+    }
+    if let Some(k) = identity {
+        assert_eq!(pairs.start[k + 1] - pairs.start[k], n_dst, "the identity offset must pair every row with itself");
     }
     // Forward reads W_k (c_in × c_out) as stored; backward reads W_kᵀ.
     let (rsb, csb) = match direction {
@@ -224,15 +226,27 @@ pub fn pair_conv<T: Element>(
         PairDirection::Forward => (&pairs.input, &pairs.output),
         PairDirection::Backward => (&pairs.output, &pairs.input),
     };
-    if let Some(k) = identity {
-        let w = &weight[k * c_src * c_dst..];
-        out.par_chunks_mut(CHUNK_ROWS * c_dst).zip(src.par_chunks(CHUNK_ROWS * c_src)).for_each(|(dst, rows)| {
-            let m = rows.len() / c_src.max(1);
-            unsafe {
-                serial_gemm(m, c_src, c_dst, rows.as_ptr(), c_src as isize, 1, w.as_ptr(), rsb, csb, T::ZERO, dst.as_mut_ptr(), c_dst as isize, 1);
-            }
-        });
-    }
+    let mut out = match identity {
+        // The centre's GEMM (beta = 0) writes every output row without reading it, so the
+        // output is not zeroed first (a whole pass over it, and its page faults, saved).
+        Some(k) if c_src > 0 => {
+            let w = &weight[k * c_src * c_dst..];
+            let mut out = Vec::<T>::with_capacity(n_dst * c_dst);
+            out.spare_capacity_mut()[..n_dst * c_dst].par_chunks_mut(CHUNK_ROWS * c_dst).zip(src.par_chunks(CHUNK_ROWS * c_src)).for_each(
+                |(dst, rows)| {
+                    let m = rows.len() / c_src;
+                    // SAFETY: matrixmultiply writes C without reading it when beta is zero.
+                    unsafe {
+                        serial_gemm(m, c_src, c_dst, rows.as_ptr(), c_src as isize, 1, w.as_ptr(), rsb, csb, T::ZERO, dst.as_mut_ptr().cast::<T>(), c_dst as isize, 1);
+                    }
+                },
+            );
+            // SAFETY: the identity offset has n_dst pairs (asserted), so every row was written.
+            unsafe { out.set_len(n_dst * c_dst) };
+            out
+        }
+        _ => vec![T::ZERO; n_dst * c_dst],
+    };
     let out_ptr = SyncPtr(out.as_mut_ptr());
     for k in (0..volume).filter(|&k| Some(k) != identity) {
         let (s, e) = (pairs.start[k], pairs.start[k + 1]);
