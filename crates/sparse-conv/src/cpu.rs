@@ -216,6 +216,8 @@ pub fn pair_conv<T: Element>(
     }
     if let Some(k) = identity {
         assert_eq!(pairs.start[k + 1] - pairs.start[k], n_dst, "the identity offset must pair every row with itself");
+        // Every output row is then written by the centre GEMM below (the output is not zeroed).
+        assert!(src.len() >= n_dst * c_src, "the identity offset reads {n_dst} source rows, the source has fewer");
     }
     // Forward reads W_k (c_in × c_out) as stored; backward reads W_kᵀ.
     let (rsb, csb) = match direction {
