@@ -1,9 +1,8 @@
 //! The sparse convolution as a Burn backend extension, with its own backward in `Autodiff`.
 //!
-//! The trait's default bodies compose Burn primitives (select, matmul, select-assign per offset):
-//! that is what the GPU (`Cube`) runs. The CPU backends override all three methods with the slice
-//! kernels of [`crate::cpu`]. `Autodiff` registers a backward that calls the two gradient methods
-//! of the inner backend, never the differentiated composition.
+//! The CPU backends run the slice kernels of [`crate::cpu`], the cubecl backend (wgpu, CUDA, …)
+//! the kernels of [`crate::cube`]. `Autodiff` registers a backward that calls the two gradient
+//! methods of the inner backend, never a differentiated composition.
 // burn-ndarray is deprecated in Burn 0.22 but is one of the CPU backends pmunet supports.
 #![allow(deprecated)]
 
@@ -16,65 +15,96 @@ use burn::backend::autodiff::grads::Gradients;
 use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
 use burn::backend::tensor::{FloatTensor, IndexingUpdateOp, IntTensor};
 use burn::backend::ndarray::NdArrayTensor;
-use burn::backend::{Autodiff, Backend, Cube, Flex, NdArray, TensorMetadata, backend_extension};
+use burn::backend::{Autodiff, Backend, Flex, NdArray, TensorMetadata, backend_extension};
+use burn_cubecl::CubeBackend;
 use burn::tensor::{DType, Shape, TensorData};
 
 use crate::cpu::{self, PairDirection};
+use crate::cube;
 use crate::kernel_map::KernelMap;
 
 /// A backend that can run the sparse convolution of a [`KernelMap`].
 ///
 /// Shapes: features `[n_in, C_in]`, weight `[K, C_in, C_out]`, output `[n_out, C_out]`.
-#[backend_extension(NdArray, Flex, Cube, Autodiff)]
+///
+/// The default bodies compose Burn primitives ([`composed`]); every backend pmunet runs on
+/// overrides them with its own kernels. `Fusion` (wgpu's default) records the calls lazily and
+/// runs the inner backend's kernels.
+#[backend_extension(NdArray, Flex, Cube, Fusion, Autodiff)]
 pub trait SparseConvBackend: Backend {
     /// `out[o] = Σ_k Σ_{(i, o) ∈ M_k} x[i] · W_k`.
+    #[fusion(dtype = features, shape = Shape::new([map.n_out(), weight[2]]))]
     fn sparse_conv(features: FloatTensor<Self>, weight: FloatTensor<Self>, map: Arc<KernelMap>) -> FloatTensor<Self> {
+        composed::forward::<Self>(features, weight, &map)
+    }
+
+    /// The feature gradient: `dx[i] = Σ_k Σ_{(i, o) ∈ M_k} g[o] · W_kᵀ`.
+    #[fusion(dtype = grad_out, shape = Shape::new([map.n_in(), weight[1]]))]
+    fn sparse_conv_input_grad(grad_out: FloatTensor<Self>, weight: FloatTensor<Self>, map: Arc<KernelMap>) -> FloatTensor<Self> {
+        composed::input_grad::<Self>(grad_out, weight, &map)
+    }
+
+    /// The weight gradient: `dW_k = Σ_{(i, o) ∈ M_k} x[i]ᵀ · g[o]`, shape `[K, C_in, C_out]`.
+    #[fusion(dtype = features, shape = Shape::new([map.volume(), features[1], grad_out[1]]))]
+    fn sparse_conv_weight_grad(features: FloatTensor<Self>, grad_out: FloatTensor<Self>, map: Arc<KernelMap>) -> FloatTensor<Self> {
+        composed::weight_grad::<Self>(features, grad_out, &map)
+    }
+}
+
+/// The op written with Burn primitives (select, matmul, select-assign per offset): the reference
+/// any backend can run, and the fallback of the GPU kernels for dtypes they do not cover.
+/// Differentiable, which is what a second derivative through `Autodiff` uses.
+pub mod composed {
+    use super::*;
+
+    /// See [`SparseConvBackend::sparse_conv`].
+    pub fn forward<B: Backend>(features: FloatTensor<B>, weight: FloatTensor<B>, map: &KernelMap) -> FloatTensor<B> {
         let n_out = map.n_out();
         let c_out = weight.shape()[2];
         let device = features.device();
-        let mut out = Self::float_zeros(Shape::new([n_out, c_out]), &device, features.dtype().into());
+        let mut out = B::float_zeros(Shape::new([n_out, c_out]), &device, features.dtype().into());
         for k in 0..map.volume() {
-            let Some((input, output)) = offset_indices::<Self>(&map, k, &device) else { continue };
-            let w_k = weight_slice::<Self>(weight.clone(), k, &device);
-            let gathered = Self::float_select(features.clone(), 0, input);
-            let product = Self::float_matmul(gathered, w_k);
-            out = Self::float_select_assign(out, 0, output, product, IndexingUpdateOp::Add);
+            let Some((input, output)) = offset_indices::<B>(map, k, &device) else { continue };
+            let w_k = weight_slice::<B>(weight.clone(), k, &device);
+            let gathered = B::float_select(features.clone(), 0, input);
+            let product = B::float_matmul(gathered, w_k);
+            out = B::float_select_assign(out, 0, output, product, IndexingUpdateOp::Add);
         }
         out
     }
 
-    /// The feature gradient: `dx[i] = Σ_k Σ_{(i, o) ∈ M_k} g[o] · W_kᵀ`.
-    fn sparse_conv_input_grad(grad_out: FloatTensor<Self>, weight: FloatTensor<Self>, map: Arc<KernelMap>) -> FloatTensor<Self> {
+    /// See [`SparseConvBackend::sparse_conv_input_grad`].
+    pub fn input_grad<B: Backend>(grad_out: FloatTensor<B>, weight: FloatTensor<B>, map: &KernelMap) -> FloatTensor<B> {
         let c_in = weight.shape()[1];
         let device = grad_out.device();
-        let mut grad = Self::float_zeros(Shape::new([map.n_in(), c_in]), &device, grad_out.dtype().into());
+        let mut grad = B::float_zeros(Shape::new([map.n_in(), c_in]), &device, grad_out.dtype().into());
         for k in 0..map.volume() {
-            let Some((input, output)) = offset_indices::<Self>(&map, k, &device) else { continue };
-            let w_k = Self::float_transpose(weight_slice::<Self>(weight.clone(), k, &device));
-            let gathered = Self::float_select(grad_out.clone(), 0, output);
-            let product = Self::float_matmul(gathered, w_k);
-            grad = Self::float_select_assign(grad, 0, input, product, IndexingUpdateOp::Add);
+            let Some((input, output)) = offset_indices::<B>(map, k, &device) else { continue };
+            let w_k = B::float_transpose(weight_slice::<B>(weight.clone(), k, &device));
+            let gathered = B::float_select(grad_out.clone(), 0, output);
+            let product = B::float_matmul(gathered, w_k);
+            grad = B::float_select_assign(grad, 0, input, product, IndexingUpdateOp::Add);
         }
         grad
     }
 
-    /// The weight gradient: `dW_k = Σ_{(i, o) ∈ M_k} x[i]ᵀ · g[o]`, shape `[K, C_in, C_out]`.
-    fn sparse_conv_weight_grad(features: FloatTensor<Self>, grad_out: FloatTensor<Self>, map: Arc<KernelMap>) -> FloatTensor<Self> {
+    /// See [`SparseConvBackend::sparse_conv_weight_grad`].
+    pub fn weight_grad<B: Backend>(features: FloatTensor<B>, grad_out: FloatTensor<B>, map: &KernelMap) -> FloatTensor<B> {
         let c_in = features.shape()[1];
         let c_out = grad_out.shape()[1];
         let device = features.device();
         let dtype = features.dtype().into();
         let blocks = (0..map.volume())
-            .map(|k| match offset_indices::<Self>(&map, k, &device) {
-                None => Self::float_zeros(Shape::new([1, c_in, c_out]), &device, dtype),
+            .map(|k| match offset_indices::<B>(map, k, &device) {
+                None => B::float_zeros(Shape::new([1, c_in, c_out]), &device, dtype),
                 Some((input, output)) => {
-                    let xs = Self::float_transpose(Self::float_select(features.clone(), 0, input));
-                    let gs = Self::float_select(grad_out.clone(), 0, output);
-                    Self::float_reshape(Self::float_matmul(xs, gs), Shape::new([1, c_in, c_out]))
+                    let xs = B::float_transpose(B::float_select(features.clone(), 0, input));
+                    let gs = B::float_select(grad_out.clone(), 0, output);
+                    B::float_reshape(B::float_matmul(xs, gs), Shape::new([1, c_in, c_out]))
                 }
             })
             .collect();
-        Self::float_cat(blocks, 0)
+        B::float_cat(blocks, 0)
     }
 }
 
@@ -220,7 +250,19 @@ mod cpu_impls {
     cpu_backend!(Flex);
 }
 
-impl SparseConvBackend for Cube {}
+/// CubeCL kernels for f32 ([`crate::cube`]), the composition for other dtypes.
+impl SparseConvBackend for CubeBackend {
+    fn sparse_conv(features: FloatTensor<Self>, weight: FloatTensor<Self>, map: Arc<KernelMap>) -> FloatTensor<Self> {
+        check_shapes(&features.shape(), &weight.shape(), map.n_in(), map.volume());
+        if cube::runs(&features) { cube::forward(features, weight, &map) } else { composed::forward::<Self>(features, weight, &map) }
+    }
+    fn sparse_conv_input_grad(grad_out: FloatTensor<Self>, weight: FloatTensor<Self>, map: Arc<KernelMap>) -> FloatTensor<Self> {
+        if cube::runs(&grad_out) { cube::input_grad(grad_out, weight, &map) } else { composed::input_grad::<Self>(grad_out, weight, &map) }
+    }
+    fn sparse_conv_weight_grad(features: FloatTensor<Self>, grad_out: FloatTensor<Self>, map: Arc<KernelMap>) -> FloatTensor<Self> {
+        if cube::runs(&features) { cube::weight_grad(features, grad_out, &map) } else { composed::weight_grad::<Self>(features, grad_out, &map) }
+    }
+}
 
 #[derive(Debug)]
 struct SparseConvBackward;

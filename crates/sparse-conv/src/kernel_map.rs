@@ -1,7 +1,8 @@
 //! Kernel maps (rulebooks): which input row feeds which output row through which kernel offset.
 
 use std::fmt;
-use std::sync::{Arc, OnceLock};
+use std::any::Any;
+use std::sync::{Arc, Mutex, OnceLock};
 
 use rayon::prelude::*;
 
@@ -79,6 +80,9 @@ pub struct KernelMap {
     /// made only if something asks (the kernels run on `pairs`).
     in_table: OnceLock<Arc<NeighborTable>>,
     pairs: OnceLock<OffsetPairs>,
+    /// What a backend derives from the map and keeps with it (e.g. the tables uploaded to a GPU),
+    /// freed with the map.
+    attachments: Mutex<Vec<Arc<dyn Any + Send + Sync>>>,
 }
 
 impl fmt::Debug for KernelMap {
@@ -168,6 +172,20 @@ impl KernelMap {
         })
     }
 
+    /// The first attachment of type `T` that `matches`, made with `make` and kept if there is none.
+    ///
+    /// Backends keep derived forms of the map here (device copies of its tables) so that every
+    /// layer sharing the map shares them too.
+    pub fn attachment<T: Any + Send + Sync>(&self, matches: impl Fn(&T) -> bool, make: impl FnOnce() -> T) -> Arc<T> {
+        let mut attachments = self.attachments.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+        let found = attachments.iter().find_map(|a| a.clone().downcast::<T>().ok().filter(|t| matches(t)));
+        found.unwrap_or_else(|| {
+            let made = Arc::new(make());
+            attachments.push(made.clone());
+            made
+        })
+    }
+
     /// The same rulebook read backwards: inputs become outputs, offsets keep their index.
     pub fn transposed(&self) -> KernelMap {
         let kind = match self.kind {
@@ -182,6 +200,7 @@ impl KernelMap {
             out_table: self.in_table_arc().clone(),
             in_table: OnceLock::from(self.out_table.clone()),
             pairs: OnceLock::new(),
+            attachments: Mutex::default(),
         }
     }
 
@@ -224,6 +243,7 @@ impl KernelMap {
             out_table: Arc::new(table),
             in_table: OnceLock::new(),
             pairs: OnceLock::new(),
+            attachments: Mutex::default(),
         }
     }
 
@@ -272,6 +292,7 @@ impl KernelMap {
             out_table: Arc::new(out_table),
             in_table: OnceLock::from(Arc::new(in_table)),
             pairs: OnceLock::new(),
+            attachments: Mutex::default(),
         };
         Ok((map, out_coords))
     }

@@ -4,6 +4,7 @@
 //! - [`coords`]: batch-indexed voxel coordinates and their hash index.
 //! - [`kernel_map`]: rulebooks for submanifold, down-sampling and transposed convolutions.
 //! - [`cpu`]: the op's math over slices (forward, feature and weight gradients).
+//! - `cube`: the op's CubeCL kernels for GPUs (wgpu/Vulkan, CUDA, ROCm).
 //! - [`backend`]: the Burn backend extension and its `Autodiff` backward.
 //! - [`op`]: [`sparse_conv`] on Burn tensors.
 //! - [`tensor`]: [`SparseTensor`], features with coordinates and a shared map cache.
@@ -14,6 +15,7 @@
 pub mod backend;
 pub mod coords;
 pub mod cpu;
+mod cube;
 pub mod kernel_map;
 pub mod modules;
 pub mod op;

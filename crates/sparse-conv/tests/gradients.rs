@@ -121,7 +121,15 @@ fn dense_submanifold(x: Tensor<2>, w: Tensor<3>, coords: &[Coord], dev: &Device)
 
 #[test]
 fn submanifold_gradients_match_the_dense_reference() {
-    let dev = Device::flex().autodiff();
+    for target in targets() {
+        submanifold_gradients_on(&target);
+    }
+}
+
+/// The op's gradients on `target` against the dense graph's in f64 on flex.
+fn submanifold_gradients_on(target: &Target) {
+    let reference = Device::flex().autodiff();
+    let dev = target.device.clone().autodiff();
     let mut r = rng(3);
     let coords = random_coords(&mut r, 150, 1, 5, 1);
     let (n, c_in, c_out) = (coords.len(), 3, 5);
@@ -131,15 +139,17 @@ fn submanifold_gradients_match_the_dense_reference() {
     let index = CoordIndex::build(&coords).unwrap();
     let map = Arc::new(KernelMap::submanifold(&coords, &index, 3, 1));
     let run = |sparse: bool| {
-        let x = tensor2(&xv, [n, c_in], &dev, DType::F64).require_grad();
-        let w = tensor3(&wv, [27, c_in, c_out], &dev, DType::F64).require_grad();
-        let out = if sparse { sparse_conv(x.clone(), w.clone(), &map) } else { dense_submanifold(x.clone(), w.clone(), &coords, &dev) };
-        let g = tensor2(&gv, [n, c_out], &dev, DType::F64);
+        let (dev, dtype) = if sparse { (&dev, target.dtype) } else { (&reference, DType::F64) };
+        let x = tensor2(&xv, [n, c_in], dev, dtype).require_grad();
+        let w = tensor3(&wv, [27, c_in, c_out], dev, dtype).require_grad();
+        let out = if sparse { sparse_conv(x.clone(), w.clone(), &map) } else { dense_submanifold(x.clone(), w.clone(), &coords, dev) };
+        let g = tensor2(&gv, [n, c_out], dev, dtype);
         let grads = loss(out, g).backward();
         (values(x.grad(&grads).unwrap()), values(w.grad(&grads).unwrap()))
     };
     let (sx, sw) = run(true);
     let (dx, dw) = run(false);
-    assert_close(&sx, &dx, 1e-10, "feature gradient vs dense");
-    assert_close(&sw, &dw, 1e-10, "weight gradient vs dense");
+    let tol = target.tol.max(1e-10);
+    assert_close(&sx, &dx, tol, &format!("{}: feature gradient vs dense", target.name));
+    assert_close(&sw, &dw, tol, &format!("{}: weight gradient vs dense", target.name));
 }

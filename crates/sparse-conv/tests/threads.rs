@@ -1,6 +1,7 @@
 //! The op gives bit-identical outputs and gradients at 1, 2 and 8 threads, run repeatedly: a race
 //! in a gather/scatter would show as rows that differ from run to run (the bug spconv 2.3.8's CPU
-//! submanifold convolution has at 2 threads).
+//! submanifold convolution has at 2 threads). The CubeCL kernel, whose units the GPU schedules as
+//! it likes, must be as repeatable.
 
 mod common;
 
@@ -19,9 +20,8 @@ fn forward_backward(map: &Arc<KernelMap>, x: &[f64], w: &[f64], g: &[f64], c: us
     [values(out), values(xt.grad(&grads).unwrap()), values(wt.grad(&grads).unwrap())]
 }
 
-#[test]
-fn results_do_not_depend_on_thread_count() {
-    // Dense enough that outputs have many neighbours and tiles and gradient chunks are many.
+/// Dense enough that outputs have many neighbours and tiles and gradient chunks are many.
+fn dense_case() -> (Arc<KernelMap>, Vec<f64>, Vec<f64>, Vec<f64>, usize) {
     let mut r = rng(31);
     let coords = random_coords(&mut r, 20_000, 2, 24, 1);
     let index = CoordIndex::build(&coords).unwrap();
@@ -30,6 +30,16 @@ fn results_do_not_depend_on_thread_count() {
     let x = random_values(&mut r, map.n_in() * c);
     let w = random_values(&mut r, map.volume() * c * c);
     let g = random_values(&mut r, map.n_out() * c);
+    (map, x, w, g, c)
+}
+
+fn count_differing(a: &[f64], b: &[f64]) -> usize {
+    a.iter().zip(b).filter(|(p, q)| p.to_bits() != q.to_bits()).count()
+}
+
+#[test]
+fn results_do_not_depend_on_thread_count() {
+    let (map, x, w, g, c) = dense_case();
     #[allow(deprecated)]
     for device in [Device::flex(), Device::ndarray()] {
         let single = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
@@ -39,10 +49,28 @@ fn results_do_not_depend_on_thread_count() {
             for run in 0..4 {
                 let got = pool.install(|| forward_backward(&map, &x, &w, &g, c, &device));
                 for (what, (a, b)) in ["output", "feature gradient", "weight gradient"].iter().zip(got.iter().zip(&reference)) {
-                    let differing = a.iter().zip(b).filter(|(p, q)| p.to_bits() != q.to_bits()).count();
+                    let differing = count_differing(a, b);
                     assert_eq!(differing, 0, "{device:?}: {what} differs in {differing} values at {threads} threads, run {run}");
                 }
             }
+        }
+    }
+}
+
+#[test]
+fn wgpu_results_are_identical_run_to_run() {
+    let Some(device) = wgpu_device() else { return };
+    let (map, x, w, g, c) = dense_case();
+    let reference = forward_backward(&map, &x, &w, &g, c, &device);
+    let flex = forward_backward(&map, &x, &w, &g, c, &Device::flex());
+    for (what, (a, b)) in ["output", "feature gradient", "weight gradient"].iter().zip(reference.iter().zip(&flex)) {
+        assert_close(a, b, 1e-5, &format!("wgpu vs flex: {what}"));
+    }
+    for run in 0..4 {
+        let got = forward_backward(&map, &x, &w, &g, c, &device);
+        for (what, (a, b)) in ["output", "feature gradient", "weight gradient"].iter().zip(got.iter().zip(&reference)) {
+            let differing = count_differing(a, b);
+            assert_eq!(differing, 0, "wgpu: {what} differs in {differing} values on run {run}");
         }
     }
 }

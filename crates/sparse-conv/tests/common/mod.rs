@@ -185,3 +185,26 @@ pub fn wgpu_device() -> Option<Device> {
         }
     }
 }
+
+/// A backend the op's correctness tests run on, with the dtype it runs there and the tolerance
+/// that dtype allows against an f64 reference.
+pub struct Target {
+    pub name: &'static str,
+    pub device: Device,
+    pub dtype: DType,
+    pub tol: f64,
+}
+
+/// Every backend's own kernels: flex and ndarray in f64, and the CubeCL kernel on wgpu in f32
+/// (the precision it runs; sums of ≤ 27·C products of values in [-1, 1]).
+pub fn targets() -> Vec<Target> {
+    #[allow(deprecated)]
+    let mut targets = vec![
+        Target { name: "flex", device: Device::flex(), dtype: DType::F64, tol: 1e-12 },
+        Target { name: "ndarray", device: Device::ndarray(), dtype: DType::F64, tol: 1e-12 },
+    ];
+    if let Some(device) = wgpu_device() {
+        targets.push(Target { name: "wgpu", device, dtype: DType::F32, tol: 1e-5 });
+    }
+    targets
+}
