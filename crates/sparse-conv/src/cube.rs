@@ -2,12 +2,15 @@
 //!
 //! The same sums as [`crate::cpu`], arranged for a GPU:
 //! - forward and feature gradient are one output-stationary kernel over a [`NeighborTable`]: a
-//!   unit owns one `(row, channel)` of the result and sums its ≤ K partners in offset order, so
-//!   no atomics are needed (the software Vulkan driver has no f32 atomics) and results do not
-//!   depend on scheduling;
-//! - the weight gradient gives each `(offset, c_in, c_out)` a unit that walks that offset's pairs
-//!   (cut into a fixed number of slices whose partial sums are added afterwards), so it too is
-//!   deterministic.
+//!   unit owns a vector of channels of one row and sums its ≤ K partners in offset order, so no
+//!   atomics are needed (the software Vulkan driver has no f32 atomics) and results do not depend
+//!   on scheduling;
+//! - the weight gradient gives each block of `(offset, c_in, c_out)` a unit that walks that
+//!   offset's pairs (cut into a fixed number of slices whose partial sums are added afterwards),
+//!   so it too is deterministic.
+//!
+//! Loads and multiply-adds are vectors of 4 floats where the channel counts allow (2 or 1
+//! otherwise).
 //!
 //! The map's tables go to the device once per map and device and stay with the map
 //! ([`KernelMap::attachment`]), so a U-Net's layers sharing one map share one upload.
@@ -32,76 +35,98 @@ use crate::kernel_map::{KernelMap, NeighborTable};
 /// Units per cube of every launch here.
 const CUBE_UNITS: u32 = 256;
 
-/// `out[o, c] = Σ_k Σ_r src[table[o, k], r] · w[k, r, c]`, with `w`'s reduction and output
-/// strides given so the same kernel runs the forward (`w[k, c_in, c_out]` read as is) and the
-/// feature gradient (read transposed). `table` entries `≥ n_src` mean "no partner".
-#[cube(launch)]
-fn gather_conv_kernel<F: Float>(
-    src: &[F],
-    weight: &[F],
+/// `out[o, c] = Σ_k Σ_r src[table[o, k], r] · w[k, r, c]`, with `w` laid out `[K, C_red, C_out]`
+/// (the forward's weight as is, the feature gradient's transposed). `table` entries `≥ n_src`
+/// mean "no partner". A unit owns one row and `N` consecutive channels; each vector of `N` source
+/// values read meets `N` weight vectors, so a unit does `N²` multiply-adds per `N + 1` loads.
+#[cube(launch_unchecked)]
+fn gather_conv_kernel<F: Float, N: Size>(
+    src: &[Vector<F, N>],
+    weight: &[Vector<F, N>],
     table: &[u32],
-    out: &mut [F],
+    out: &mut [Vector<F, N>],
     n_src: u32,
-    out_rows: usize,
-    c_red: usize,
-    c_out: usize,
+    rows: usize,
+    c_red_vectors: usize,
+    c_out_vectors: usize,
     volume: usize,
-    w_red_stride: usize,
-    w_out_stride: usize,
 ) {
     let pos = ABSOLUTE_POS;
-    if pos >= out_rows * c_out {
+    if pos >= rows * c_out_vectors {
         terminate!();
     }
-    let row = pos / c_out;
-    let channel = pos % c_out;
-    let mut acc = F::new(0.0);
+    let row = pos / c_out_vectors;
+    let channel = pos % c_out_vectors;
+    let mut acc = Vector::<F, N>::new(F::new(0.0));
+    let lanes = acc.vector_size();
+    let w_offset_stride = c_red_vectors * lanes * c_out_vectors;
     for k in 0..volume {
         let partner = table[row * volume + k];
         if partner < n_src {
-            let src_base = partner as usize * c_red;
-            let w_base = k * c_red * c_out + channel * w_out_stride;
-            for r in 0..c_red {
-                acc += src[src_base + r] * weight[w_base + r * w_red_stride];
+            let src_base = partner as usize * c_red_vectors;
+            let w_base = k * w_offset_stride + channel;
+            for r in 0..c_red_vectors {
+                let values = src[src_base + r];
+                let w_row = w_base + r * lanes * c_out_vectors;
+                #[unroll]
+                for lane in 0..lanes {
+                    acc += Vector::new(values.extract(lane)) * weight[w_row + lane * c_out_vectors];
+                }
             }
         }
     }
     out[pos] = acc;
 }
 
-/// `partial[s, k, i, o] = Σ_{p ∈ slice s of offset k} x[input[p], i] · g[output[p], o]`.
-#[cube(launch)]
-fn weight_grad_kernel<F: Float>(
-    x: &[F],
-    g: &[F],
+/// `partial[s, k, i, o] = Σ_{p ∈ slice s of offset k} x[input[p], i] · g[output[p], o]`. A unit
+/// owns an `N × N` block (`N` input channels by a vector of `N` output channels).
+#[cube(launch_unchecked)]
+fn weight_grad_kernel<F: Float, N: Size>(
+    x: &[Vector<F, N>],
+    g: &[Vector<F, N>],
     start: &[u32],
     input: &[u32],
     output: &[u32],
-    partial: &mut [F],
-    c_in: usize,
-    c_out: usize,
+    partial: &mut [Vector<F, N>],
+    c_in_vectors: usize,
+    c_out_vectors: usize,
     volume: usize,
     slices: usize,
 ) {
     let pos = ABSOLUTE_POS;
-    let per_slice = volume * c_in * c_out;
-    if pos >= slices * per_slice {
+    if pos >= slices * volume * c_in_vectors * c_out_vectors {
         terminate!();
     }
-    let slice = pos / per_slice;
-    let rest = pos % per_slice;
-    let k = rest / (c_in * c_out);
-    let i = (rest / c_out) % c_in;
-    let o = rest % c_out;
+    let o = pos % c_out_vectors;
+    let rest = pos / c_out_vectors;
+    let i = rest % c_in_vectors;
+    let rest = rest / c_in_vectors;
+    let k = rest % volume;
+    let slice = rest / volume;
     let begin = start[k] as usize;
     let len = start[k + 1] as usize - begin;
     let from = begin + len * slice / slices;
     let to = begin + len * (slice + 1) / slices;
-    let mut acc = F::new(0.0);
-    for p in from..to {
-        acc += x[input[p] as usize * c_in + i] * g[output[p] as usize * c_out + o];
+    let zero = Vector::<F, N>::new(F::new(0.0));
+    let lanes = zero.vector_size();
+    let mut acc = Array::<Vector<F, N>>::new(lanes);
+    #[unroll]
+    for lane in 0..lanes {
+        acc[lane] = zero;
     }
-    partial[pos] = acc;
+    for p in from..to {
+        let xs = x[input[p] as usize * c_in_vectors + i];
+        let gs = g[output[p] as usize * c_out_vectors + o];
+        #[unroll]
+        for lane in 0..lanes {
+            acc[lane] += Vector::new(xs.extract(lane)) * gs;
+        }
+    }
+    let base = ((slice * volume + k) * c_in_vectors + i) * lanes;
+    #[unroll]
+    for lane in 0..lanes {
+        partial[(base + lane) * c_out_vectors + o] = acc[lane];
+    }
 }
 
 /// A map's tables on one device, each uploaded the first time a kernel needs it.
@@ -141,68 +166,71 @@ fn contiguous(t: CubeTensor) -> CubeTensor {
     if t.is_contiguous() { t } else { into_contiguous(t) }
 }
 
-/// The whole buffer of a contiguous tensor.
-fn buffer(t: &CubeTensor) -> BufferArg {
-    unsafe { BufferArg::from_raw_parts(t.handle.clone(), t.meta.num_elements()) }
-}
-
 fn units(client: &Client, count: usize) -> (CubeCount, CubeDim) {
     let dim = CubeDim::new_1d(CUBE_UNITS);
     (calculate_cube_count_elemwise(client, count, dim), dim)
 }
 
-/// Which side of the map the gather runs over.
-#[derive(Clone, Copy)]
-enum Direction {
-    /// Outputs gather inputs through `W`.
-    Forward,
-    /// Inputs gather output gradients through `Wᵀ`.
-    Backward,
+/// The widest vector (4, 2 or 1 floats) that divides every channel count.
+fn vector_size(channels: &[usize]) -> usize {
+    [4, 2, 1].into_iter().find(|v| channels.iter().all(|c| c % v == 0)).unwrap_or(1)
 }
 
-fn gather_conv(src: CubeTensor, weight: CubeTensor, map: &KernelMap, direction: Direction) -> CubeTensor {
-    let (src, weight) = (contiguous(src), contiguous(weight));
-    let [_, c_in, c_out] = weight.meta.shape().dims();
-    let device_tables = tables(map, &src.device);
-    let client = src.client.clone();
-    let (table, rows, c_red, c_res, w_red_stride, w_out_stride) = match direction {
-        Direction::Forward => (device_tables.out_table.get_or_init(|| upload_table(&client, map.out_table())), map.n_out(), c_in, c_out, c_out, 1),
-        Direction::Backward => (device_tables.in_table.get_or_init(|| upload_table(&client, map.in_table())), map.n_in(), c_out, c_in, 1, c_out),
-    };
+/// The whole buffer of a contiguous tensor, as vectors of `vector` floats.
+fn vectors(t: &CubeTensor, vector: usize) -> BufferArg {
+    unsafe { BufferArg::from_raw_parts(t.handle.clone(), t.meta.num_elements() / vector) }
+}
+
+/// `out[o] = Σ_k src[table[o, k]] · w_k` for `w` laid out `[K, C_red, C_out]`.
+fn gather_conv(src: CubeTensor, weight: CubeTensor, table: &Handle, rows: usize, volume: usize) -> CubeTensor {
+    let [_, c_red, c_out] = weight.meta.shape().dims();
     let n_src = src.meta.shape()[0];
-    if rows * c_res == 0 || n_src * c_red == 0 {
+    if rows * c_out == 0 || n_src * c_red == 0 {
         // Nothing to gather (and wgpu cannot bind an empty buffer).
-        return zeros(&src, Shape::new([rows, c_res]));
+        return zeros(&src, Shape::new([rows, c_out]));
     }
-    let out = empty_f32(&src, Shape::new([rows, c_res]));
-    let (count, dim) = units(&client, rows * c_res);
-    gather_conv_kernel::launch::<f32>(
-        &client,
-        count,
-        dim,
-        buffer(&src),
-        buffer(&weight),
-        unsafe { BufferArg::from_raw_parts(table.clone(), rows * map.volume()) },
-        buffer(&out),
-        n_src as u32,
-        rows,
-        c_red,
-        c_res,
-        map.volume(),
-        w_red_stride,
-        w_out_stride,
-    );
+    let vector = vector_size(&[c_red, c_out]);
+    let out = empty_f32(&src, Shape::new([rows, c_out]));
+    let client = src.client.clone();
+    let (count, dim) = units(&client, rows * c_out / vector);
+    // Safety: every index the kernel forms is in bounds: rows and channels by the guard on
+    // `pos`, partners by `partner < n_src`, weights by the shapes checked by the callers.
+    unsafe {
+        gather_conv_kernel::launch_unchecked::<f32>(
+            &client,
+            count,
+            dim,
+            vector,
+            vectors(&src, vector),
+            vectors(&weight, vector),
+            BufferArg::from_raw_parts(table.clone(), rows * volume),
+            vectors(&out, vector),
+            n_src as u32,
+            rows,
+            c_red / vector,
+            c_out / vector,
+            volume,
+        );
+    }
     out
 }
 
 /// Forward on a cube device (f32).
 pub(crate) fn forward(features: CubeTensor, weight: CubeTensor, map: &KernelMap) -> CubeTensor {
-    gather_conv(features, weight, map, Direction::Forward)
+    let (features, weight) = (contiguous(features), contiguous(weight));
+    let tables = tables(map, &features.device);
+    let table = tables.out_table.get_or_init(|| upload_table(&features.client, map.out_table()));
+    gather_conv(features, weight, table, map.n_out(), map.volume())
 }
 
-/// Feature gradient on a cube device (f32).
+/// Feature gradient on a cube device (f32): the forward's gather over the transposed map, with
+/// `W_kᵀ`.
 pub(crate) fn input_grad(grad_out: CubeTensor, weight: CubeTensor, map: &KernelMap) -> CubeTensor {
-    gather_conv(grad_out, weight, map, Direction::Backward)
+    let grad_out = contiguous(grad_out);
+    let weight_t = into_contiguous(CubeBackend::float_swap_dims(weight, 1, 2));
+    let tables = tables(map, &grad_out.device);
+    let table = tables.in_table.get_or_init(|| upload_table(&grad_out.client, map.in_table()));
+    gather_conv(grad_out, weight_t, table, map.n_in(), map.volume())
 }
 
 /// Weight gradient on a cube device (f32), `[K, C_in, C_out]`.
@@ -220,27 +248,32 @@ pub(crate) fn weight_grad(features: CubeTensor, grad_out: CubeTensor, map: &Kern
         let start: Vec<u32> = pairs.start.iter().map(|&s| s as u32).collect();
         [upload_u32(&client, &start), upload_u32(&client, &pairs.input), upload_u32(&client, &pairs.output)]
     });
-    // Enough units to fill a GPU when the weight is small (C=32: 27k per slice), never slices
-    // shorter than a few dozen pairs. The slice count depends on the problem only.
+    let vector = vector_size(&[c_in, c_out]);
+    // Enough units to fill a GPU when the weight is small (C=32: 27k values per slice), never
+    // slices shorter than a few dozen pairs. The slice count depends on the problem only.
     let per_slice = volume * c_in * c_out;
     let slices = (1 << 18).div_ceil(per_slice).clamp(1, (num_pairs / (32 * volume)).max(1));
     let partial = empty_f32(&features, Shape::new([slices, volume, c_in, c_out]));
-    let (count, dim) = units(&client, slices * per_slice);
-    weight_grad_kernel::launch::<f32>(
-        &client,
-        count,
-        dim,
-        buffer(&features),
-        buffer(&grad_out),
-        unsafe { BufferArg::from_raw_parts(start.clone(), volume + 1) },
-        unsafe { BufferArg::from_raw_parts(input.clone(), num_pairs) },
-        unsafe { BufferArg::from_raw_parts(output.clone(), num_pairs) },
-        buffer(&partial),
-        c_in,
-        c_out,
-        volume,
-        slices,
-    );
+    let (count, dim) = units(&client, slices * per_slice / (vector * vector));
+    // Safety: units past the last block return; pair rows are rows of `features` and `grad_out`.
+    unsafe {
+        weight_grad_kernel::launch_unchecked::<f32>(
+            &client,
+            count,
+            dim,
+            vector,
+            vectors(&features, vector),
+            vectors(&grad_out, vector),
+            BufferArg::from_raw_parts(start.clone(), volume + 1),
+            BufferArg::from_raw_parts(input.clone(), num_pairs),
+            BufferArg::from_raw_parts(output.clone(), num_pairs),
+            vectors(&partial, vector),
+            c_in / vector,
+            c_out / vector,
+            volume,
+            slices,
+        );
+    }
     let summed = if slices == 1 { partial } else { CubeBackend::float_sum_dim(partial, 0) };
     CubeBackend::float_reshape(summed, Shape::new([volume, c_in, c_out]))
 }
