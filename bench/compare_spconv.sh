@@ -19,9 +19,9 @@
 # Steps (each writes <name>.json, <name>.log = stderr, <name>.rc = exit status into the results folder):
 #   spconv                 bench/peer_spconv.py (parts gemm,convs,crosscheck[,minkunet])
 #   pmunet_conv_<b>        cargo run -p sparse-conv --bin sparse-conv-bench -- --coords S --backend b ... --json
-#   pmunet_model_<b>_b1    cargo run -p model --bin model-bench -- --model person_minkunet ... --batch 1 --json
-#                          (its forward_ms = inference of one frame)
-#   pmunet_model_<b>_b2    the same with --batch 2 (train_step_ms and peak_train_mib = the training step)
+#   pmunet_model_<b>_b1    cargo run -p model --bin model-bench -- --model person_minkunet ... --batch 1 --only infer
+#                          --json (its forward_ms = inference of one frame)
+#   pmunet_model_<b>_b2    the same with --batch 2 --only train (train_step_ms, peak_train_mib)
 # then bench/compare_table.py prints the table and writes table.md.
 # cargo runs with the default (dev) profile and no extra features, so the build in target/ is reused.
 set -uo pipefail
@@ -142,9 +142,12 @@ for b in "${BACKEND_LIST[@]}"; do
 done
 if [[ $QUICK != 1 ]]; then
     for b in "${BACKEND_LIST[@]}"; do
-        for batch in 1 2; do
+        # The peer's rows: inference at batch 1, the training step (and its peak) at batch 2, each
+        # in a process of its own so the peak is that figure's alone.
+        for spec in "1 infer" "2 train"; do
+            read -r batch only <<< "$spec"
             step "pmunet_model_${b}_b$batch" cargo run -p model --bin model-bench -- \
-                --model person_minkunet --coords "$SCENE" --backend "$b" --batch "$batch" \
+                --model person_minkunet --coords "$SCENE" --backend "$b" --batch "$batch" --only "$only" \
                 --threads "$THREADS" --runs "$MODEL_RUNS" --warmup "$MODEL_WARMUP" --json
         done
     done

@@ -235,10 +235,10 @@ def main():
         "'up' reuses the down map. MinkUNet rebuilds every map on every call on both sides.",
         "MinkUNet: spconv's inference is a batch-1 process (eval, no grad) and its training step a batch-2 process "
         "(loss = mean of squared head outputs, Adam); pmunet's inference figure is model-bench --batch 1 "
-        "forward_ms, its training step and peak are model-bench --batch 2 train_step_ms / peak_train_mib "
+        "--only infer forward_ms, its training step and peak are model-bench --batch 2 --only train train_step_ms / peak_train_mib "
         "(pmunet's loss is the detector loss on a frame without boxes). Peak RSS is each process's own "
         "(spconv: ru_maxrss of the training subprocess, which includes ~0.47 GiB from importing torch and building the model, rss_before_mib in spconv.json; "
-        "pmunet: VmHWM, after its batch-2 inference and training runs).",
+        "pmunet: VmHWM of the batch-2 training process, which runs nothing else).",
         "SGEMM (higher is better, no target): spconv's cell is torch.matmul (MKL) of 2048³ at the same "
         "thread count; pmunet's is sparse-conv-bench's `sgemm.gflops` (the GEMM its kernels call), n/a where "
         "the build prints none.",

@@ -57,61 +57,75 @@ pub struct BenchReport {
     /// Trainable parameters.
     pub parameters: usize,
     /// Median inference forward pass, head output read back, ms.
-    pub forward_ms: f64,
+    pub forward_ms: Option<f64>,
     /// Median detection (forward, decoding and NMS), ms.
-    pub detect_ms: f64,
+    pub detect_ms: Option<f64>,
     /// Median training step (forward, loss, backward, Adam), ms.
-    pub train_step_ms: f64,
+    pub train_step_ms: Option<f64>,
     /// Peak RSS after the inference runs (forward's peak), MiB.
-    pub peak_forward_mib: f64,
+    pub peak_forward_mib: Option<f64>,
     /// Peak RSS after the training steps (the process's peak), MiB.
-    pub peak_train_mib: f64,
+    pub peak_train_mib: Option<f64>,
     /// Timed runs per figure.
     pub runs: usize,
 }
 
 pub use sparse_conv::timing::{median_ms, peak_rss_mb};
 
+/// Which figures a run measures.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Parts {
+    /// Inference, then training (the training peak includes the inference's).
+    #[default]
+    Both,
+    /// Inference forward and detection only.
+    Inference,
+    /// Training step only, so its peak memory is the training step's alone.
+    Training,
+}
+
+/// Inference and training figures, `None` where not measured.
+type Figures = ([Option<f64>; 3], [Option<f64>; 2]);
+
 /// Times `model` (built on `device.autodiff()`) on `batch`; inference runs on its `valid()` copy.
-fn measure<M: Detector>(
-    mut model: M,
-    batch: &Batch,
-    device: &Device,
-    warmup: usize,
-    runs: usize,
-) -> (f64, f64, f64, f64, f64) {
-    let inner = device.clone().inner();
-    let eval = model.valid();
-    let forward_ms = median_ms(warmup, runs, || {
-        std::hint::black_box(eval.head_output(batch, &inner));
-    });
-    let detect_ms = median_ms(0, runs.min(3), || {
-        std::hint::black_box(eval.detect(batch, &inner));
-    });
-    let peak_forward = peak_rss_mb();
-    drop(eval);
-    let mut optim = AdamConfig::new().init();
-    let mut step = || {
-        let terms = model.clone().loss(batch, device);
-        let grads = GradientsParams::from_grads(terms.total.backward(), &model);
-        model = optim.step(1e-3, model.clone(), grads);
-    };
-    let train_ms = median_ms(warmup, runs, &mut step);
-    (forward_ms, detect_ms, train_ms, peak_forward, peak_rss_mb())
+fn measure<M: Detector>(mut model: M, batch: &Batch, device: &Device, parts: Parts, warmup: usize, runs: usize) -> Figures {
+    let (mut times, mut peaks) = ([None; 3], [None; 2]);
+    if parts != Parts::Training {
+        let inner = device.clone().inner();
+        let eval = model.valid();
+        times[0] = Some(median_ms(warmup, runs, || {
+            std::hint::black_box(eval.head_output(batch, &inner));
+        }));
+        times[1] = Some(median_ms(0, runs.min(3), || {
+            std::hint::black_box(eval.detect(batch, &inner));
+        }));
+        peaks[0] = Some(peak_rss_mb());
+    }
+    if parts != Parts::Inference {
+        let mut optim = AdamConfig::new().init();
+        let mut step = || {
+            let terms = model.clone().loss(batch, device);
+            let grads = GradientsParams::from_grads(terms.total.backward(), &model);
+            model = optim.step(1e-3, model.clone(), grads);
+        };
+        times[2] = Some(median_ms(warmup, runs, &mut step));
+        peaks[1] = Some(peak_rss_mb());
+    }
+    (times, peaks)
 }
 
 /// Benchmarks the model of `cfg` on `batch` on `device` (a plain device; training uses its
 /// autodiff twin).
-pub fn run(cfg: &ModelConfig, batch: &Batch, device: &Device, backend: &str, warmup: usize, runs: usize) -> BenchReport {
+pub fn run(cfg: &ModelConfig, batch: &Batch, device: &Device, backend: &str, parts: Parts, warmup: usize, runs: usize) -> BenchReport {
     let ad = device.clone().autodiff();
-    let (parameters, (forward_ms, detect_ms, train_step_ms, peak_forward_mib, peak_train_mib)) = match cfg {
+    let (parameters, ([forward_ms, detect_ms, train_step_ms], [peak_forward_mib, peak_train_mib])) = match cfg {
         ModelConfig::PersonMinkunet(c) => {
             let m = c.init(&ad);
-            (m.num_params(), measure(m, batch, &ad, warmup, runs))
+            (m.num_params(), measure(m, batch, &ad, parts, warmup, runs))
         }
         ModelConfig::Centerpoint(c) => {
             let m = c.init(&ad);
-            (m.num_params(), measure(m, batch, &ad, warmup, runs))
+            (m.num_params(), measure(m, batch, &ad, parts, warmup, runs))
         }
     };
     BenchReport {

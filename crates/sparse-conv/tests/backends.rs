@@ -1,11 +1,14 @@
-//! The same random case gives the same outputs and gradients on flex, ndarray and wgpu.
+//! The same random case gives the same outputs and gradients on flex, ndarray and wgpu, and the
+//! composed reference gives what the kernels give.
 
 mod common;
 
 use std::sync::Arc;
 
 use common::*;
-use sparse_conv::burn::tensor::{DType, Device};
+use sparse_conv::backend::composed;
+use sparse_conv::burn::backend::Dispatch;
+use sparse_conv::burn::tensor::{DType, Device, Tensor};
 use sparse_conv::{CoordIndex, KernelMap, sparse_conv};
 
 struct Outputs {
@@ -51,5 +54,34 @@ fn flex_ndarray_and_wgpu_agree() {
             assert_close(&other.gx, &reference.gx, 1e-5, &format!("{what}: feature gradient"));
             assert_close(&other.gw, &reference.gw, 1e-5, &format!("{what}: weight gradient"));
         }
+    }
+}
+
+/// The composition of Burn primitives (the trait's default bodies: what a backend without
+/// kernels of its own, a second derivative, or a non-f32 dtype on wgpu runs) computes what the
+/// kernels compute, for all three methods on every map kind.
+#[test]
+fn composed_reference_agrees_with_the_kernels() {
+    let mut r = rng(22);
+    let coords = random_coords(&mut r, 300, 2, 6, 1);
+    let index = CoordIndex::build(&coords).unwrap();
+    let subm = KernelMap::submanifold(&coords, &index, 3, 1);
+    let (down, _) = KernelMap::down(&coords, 2, 1).unwrap();
+    let up = down.transposed();
+    let dev = Device::flex();
+    let c = [5, 7];
+    for (name, map) in [("submanifold", Arc::new(subm)), ("down", Arc::new(down)), ("up", Arc::new(up))] {
+        let x = random_values(&mut r, map.n_in() * c[0]);
+        let w = random_values(&mut r, map.volume() * c[0] * c[1]);
+        let g = random_values(&mut r, map.n_out() * c[1]);
+        let kernels = run(&map, &x, &w, &g, c, &dev);
+        let (xt, wt) = (tensor2(&x, [map.n_in(), c[0]], &dev, DType::F32), tensor3(&w, [map.volume(), c[0], c[1]], &dev, DType::F32));
+        let gt = tensor2(&g, [map.n_out(), c[1]], &dev, DType::F32);
+        let out = Tensor::<2>::from_dispatch(composed::forward::<Dispatch>(xt.clone().into_dispatch(), wt.clone().into_dispatch(), &map));
+        let gx = Tensor::<2>::from_dispatch(composed::input_grad::<Dispatch>(gt.clone().into_dispatch(), wt.into_dispatch(), &map));
+        let gw = Tensor::<3>::from_dispatch(composed::weight_grad::<Dispatch>(xt.into_dispatch(), gt.into_dispatch(), &map));
+        assert_close(&values(out), &kernels.out, 1e-5, &format!("{name}: composed output"));
+        assert_close(&values(gx), &kernels.gx, 1e-5, &format!("{name}: composed feature gradient"));
+        assert_close(&values(gw), &kernels.gw, 1e-5, &format!("{name}: composed weight gradient"));
     }
 }

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::{Parser, ValueEnum};
-use model::bench::{bench_batch, run};
+use model::bench::{Parts, bench_batch, run};
 use model::{CenterPointConfig, ModelConfig, PersonMinkUNetConfig};
 use sparse_conv::burn::tensor::{Device, DeviceKind};
 use sparse_conv::scene;
@@ -24,6 +24,12 @@ enum Backend {
 enum Kind {
     PersonMinkunet,
     Centerpoint,
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum Only {
+    Infer,
+    Train,
 }
 
 #[derive(Parser, Debug)]
@@ -53,6 +59,9 @@ struct Args {
     /// Untimed warm-up runs per figure.
     #[arg(long, default_value_t = 1)]
     warmup: usize,
+    /// Measure only inference or only the training step (whose peak memory is then its own).
+    #[arg(long, value_enum)]
+    only: Option<Only>,
     /// Print one JSON object instead of text.
     #[arg(long)]
     json: bool,
@@ -74,7 +83,12 @@ fn main() -> anyhow::Result<()> {
         Backend::Ndarray => (Device::ndarray(), "ndarray"),
         Backend::Wgpu => (Device::wgpu(DeviceKind::DefaultDevice), "wgpu"),
     };
-    let r = run(&cfg, &batch, &device, name, args.warmup, args.runs);
+    let parts = match args.only {
+        None => Parts::Both,
+        Some(Only::Infer) => Parts::Inference,
+        Some(Only::Train) => Parts::Training,
+    };
+    let r = run(&cfg, &batch, &device, name, parts, args.warmup, args.runs);
     if args.json {
         println!("{}", serde_json::to_string(&r)?);
     } else {
@@ -82,9 +96,14 @@ fn main() -> anyhow::Result<()> {
             "{} on {} ({} threads): batch {}, {} voxels, {} parameters, median of {} runs",
             r.model, r.backend, r.threads, r.batch, r.voxels, r.parameters, r.runs
         );
-        println!("  inference forward   {:>10.1} ms   (detect incl. decode + NMS {:.1} ms)", r.forward_ms, r.detect_ms);
-        println!("  training step       {:>10.1} ms   (forward, loss, backward, Adam)", r.train_step_ms);
-        println!("  peak RSS            {:>10.0} MiB after inference, {:.0} MiB after training", r.peak_forward_mib, r.peak_train_mib);
+        if let (Some(forward), Some(detect), Some(peak)) = (r.forward_ms, r.detect_ms, r.peak_forward_mib) {
+            println!("  inference forward   {forward:>10.1} ms   (detect incl. decode + NMS {detect:.1} ms)");
+            println!("  peak RSS            {peak:>10.0} MiB after inference");
+        }
+        if let (Some(step), Some(peak)) = (r.train_step_ms, r.peak_train_mib) {
+            println!("  training step       {step:>10.1} ms   (forward, loss, backward, Adam)");
+            println!("  peak RSS            {peak:>10.0} MiB after training");
+        }
     }
     Ok(())
 }
