@@ -2,7 +2,7 @@
 //!
 //! The same sums as [`crate::cpu`], arranged for a GPU:
 //! - forward and feature gradient are one output-stationary kernel over a [`NeighborTable`]: a
-//!   unit owns a vector of channels of one row and sums its ≤ K partners in offset order, so no
+//!   unit owns a vector of channels of 4 rows and sums each row's ≤ K partners in offset order, so no
 //!   atomics are needed (the software Vulkan driver has no f32 atomics) and results do not depend
 //!   on scheduling;
 //! - the weight gradient gives each block of `(offset, c_in, c_out)` a unit that walks that
@@ -35,10 +35,13 @@ use crate::kernel_map::{KernelMap, NeighborTable};
 /// Units per cube of every launch here.
 const CUBE_UNITS: u32 = 256;
 
+/// Output rows one unit of the gather kernel computes.
+const ROWS_PER_UNIT: usize = 4;
+
 /// `out[o, c] = Σ_k Σ_r src[table[o, k], r] · w[k, r, c]`, with `w` laid out `[K, C_red, C_out]`
 /// (the forward's weight as is, the feature gradient's transposed). `table` entries `≥ n_src`
-/// mean "no partner". A unit owns one row and `N` consecutive channels; each vector of `N` source
-/// values read meets `N` weight vectors, so a unit does `N²` multiply-adds per `N + 1` loads.
+/// mean "no partner". A unit owns `ROWS` consecutive rows and `N` consecutive channels: each
+/// weight vector it loads serves all its rows, each source vector `N` weight vectors.
 #[cube(launch_unchecked)]
 fn gather_conv_kernel<F: Float, N: Size>(
     src: &[Vector<F, N>],
@@ -50,32 +53,64 @@ fn gather_conv_kernel<F: Float, N: Size>(
     c_red_vectors: usize,
     c_out_vectors: usize,
     volume: usize,
+    #[comptime] rows_per_unit: usize,
 ) {
     let pos = ABSOLUTE_POS;
-    if pos >= rows * c_out_vectors {
+    let row_blocks = rows.div_ceil(rows_per_unit);
+    if pos >= row_blocks * c_out_vectors {
         terminate!();
     }
-    let row = pos / c_out_vectors;
+    let first_row = (pos / c_out_vectors) * rows_per_unit;
     let channel = pos % c_out_vectors;
-    let mut acc = Vector::<F, N>::new(F::new(0.0));
-    let lanes = acc.vector_size();
+    let zero = Vector::<F, N>::new(F::new(0.0));
+    let lanes = zero.vector_size();
+    let mut acc = Array::<Vector<F, N>>::new(rows_per_unit);
+    let mut partners = Array::<u32>::new(rows_per_unit);
+    let mut weights = Array::<Vector<F, N>>::new(lanes);
+    #[unroll]
+    for j in 0..rows_per_unit {
+        acc[j] = zero;
+    }
     let w_offset_stride = c_red_vectors * lanes * c_out_vectors;
     for k in 0..volume {
-        let partner = table[row * volume + k];
-        if partner < n_src {
-            let src_base = partner as usize * c_red_vectors;
+        let mut any = false;
+        #[unroll]
+        for j in 0..rows_per_unit {
+            let mut partner = n_src;
+            if first_row + j < rows {
+                partner = table[(first_row + j) * volume + k];
+            }
+            partners[j] = partner;
+            any = any || partner < n_src;
+        }
+        if any {
             let w_base = k * w_offset_stride + channel;
             for r in 0..c_red_vectors {
-                let values = src[src_base + r];
                 let w_row = w_base + r * lanes * c_out_vectors;
                 #[unroll]
                 for lane in 0..lanes {
-                    acc += Vector::new(values.extract(lane)) * weight[w_row + lane * c_out_vectors];
+                    weights[lane] = weight[w_row + lane * c_out_vectors];
+                }
+                #[unroll]
+                for j in 0..rows_per_unit {
+                    let partner = partners[j];
+                    if partner < n_src {
+                        let values = src[partner as usize * c_red_vectors + r];
+                        #[unroll]
+                        for lane in 0..lanes {
+                            acc[j] += Vector::new(values.extract(lane)) * weights[lane];
+                        }
+                    }
                 }
             }
         }
     }
-    out[pos] = acc;
+    #[unroll]
+    for j in 0..rows_per_unit {
+        if first_row + j < rows {
+            out[(first_row + j) * c_out_vectors + channel] = acc[j];
+        }
+    }
 }
 
 /// `partial[s, k, i, o] = Σ_{p ∈ slice s of offset k} x[input[p], i] · g[output[p], o]`. A unit
@@ -192,7 +227,7 @@ fn gather_conv(src: CubeTensor, weight: CubeTensor, table: &Handle, rows: usize,
     let vector = vector_size(&[c_red, c_out]);
     let out = empty_f32(&src, Shape::new([rows, c_out]));
     let client = src.client.clone();
-    let (count, dim) = units(&client, rows * c_out / vector);
+    let (count, dim) = units(&client, rows.div_ceil(ROWS_PER_UNIT) * c_out / vector);
     // Safety: every index the kernel forms is in bounds: rows and channels by the guard on
     // `pos`, partners by `partner < n_src`, weights by the shapes checked by the callers.
     unsafe {
@@ -210,6 +245,7 @@ fn gather_conv(src: CubeTensor, weight: CubeTensor, table: &Handle, rows: usize,
             c_red / vector,
             c_out / vector,
             volume,
+            ROWS_PER_UNIT,
         );
     }
     out
