@@ -38,9 +38,10 @@ struct Args {
     kernel: usize,
     #[arg(long, value_enum, default_value_t = Backend::Flex)]
     backend: Backend,
-    /// CPU threads (rayon); 0 = all cores.
-    #[arg(long, default_value_t = 0)]
-    threads: usize,
+    /// CPU threads (rayon); 0 = all cores. A list (`1,2`) runs everything at each count and
+    /// prints the speed-up over the first.
+    #[arg(long, value_delimiter = ',', default_value = "0")]
+    threads: Vec<usize>,
     /// Timed runs per figure (the median is reported).
     #[arg(long, default_value_t = 10)]
     runs: usize,
@@ -136,15 +137,32 @@ fn main() -> anyhow::Result<()> {
     anyhow::ensure!(args.kernel % 2 == 1, "--kernel must be odd, got {}", args.kernel);
     anyhow::ensure!(args.runs >= 1, "--runs must be at least 1");
     anyhow::ensure!(args.scale.iter().all(|&s| s >= 1), "--scale must be at least 1");
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(args.threads).build_global();
-    pool.context("configuring the thread pool")?;
-    let threads = rayon::current_num_threads();
-
     let scene_coords = match &args.coords {
         Some(path) => scene::read_npy_coords(path)?,
         None => scene::synthetic_lidar_scene(args.seed),
     };
-    let coords = scene::tile_as_batch(&scene_coords, args.scale[0]);
+    let mut reports = Vec::new();
+    for &threads in &args.threads {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().context("configuring the thread pool")?;
+        let report = pool.install(|| measure(&args, &scene_coords))?;
+        if args.json {
+            // One object per thread count, one per line.
+            println!("{}", serde_json::to_string(&report)?);
+        } else {
+            print_table(&report);
+        }
+        reports.push(report);
+    }
+    if !args.json && reports.len() > 1 {
+        print_speedup(&reports);
+    }
+    Ok(())
+}
+
+/// Every figure of the report at the current rayon pool's thread count.
+fn measure(args: &Args, scene_coords: &[sparse_conv::Coord]) -> anyhow::Result<Report> {
+    let threads = rayon::current_num_threads();
+    let coords = scene::tile_as_batch(scene_coords, args.scale[0]);
     sparse_conv::coords::validate(&coords).context("scene coordinates")?;
     let device = match args.backend {
         Backend::Flex => Device::flex(),
@@ -211,7 +229,7 @@ fn main() -> anyhow::Result<()> {
     let mut scaling = Vec::new();
     if let (true, Some(&c)) = (args.scale.len() > 1, args.channels.first()) {
         for &scale in &args.scale {
-            let coords = scene::tile_as_batch(&scene_coords, scale);
+            let coords = scene::tile_as_batch(scene_coords, scale);
             let index = CoordIndex::build(&coords)?;
             let map = Arc::new(KernelMap::submanifold(&coords, &index, args.kernel, 1));
             let (fwd_ms, fwd_bwd_ms) = time_op(&device, &map, c, args.warmup, args.runs);
@@ -233,12 +251,7 @@ fn main() -> anyhow::Result<()> {
         scaling,
         peak_rss_mb: peak_rss_mb(),
     };
-    if args.json {
-        println!("{}", serde_json::to_string(&report)?);
-    } else {
-        print_table(&report);
-    }
-    Ok(())
+    Ok(report)
 }
 
 /// Median forward and forward+backward of the op through Burn (the backward seeded by `sum`).
@@ -306,6 +319,22 @@ fn gemm_ceiling(size: usize, warmup: usize, runs: usize) -> GemmCeiling {
         std::hint::black_box(&c);
     });
     GemmCeiling { size, ms, gflops: 2.0 * (size as f64).powi(3) / ms / 1e6 }
+}
+
+/// Each channel count's times at every thread count, and the speed-up over the first count.
+fn print_speedup(reports: &[Report]) {
+    let base = &reports[0];
+    println!("thread scaling (speed-up over {} thread(s)):", base.threads);
+    for (i, row) in base.results.iter().enumerate() {
+        let cells: Vec<String> = reports
+            .iter()
+            .map(|r| {
+                let other = &r.results[i];
+                format!("{} threads fwd {:.2} ms ({:.2}×), fwd+bwd {:.2} ms ({:.2}×)", r.threads, other.fwd_ms, row.fwd_ms / other.fwd_ms, other.fwd_bwd_ms, row.fwd_bwd_ms / other.fwd_bwd_ms)
+            })
+            .collect();
+        println!("  C={}: {}", row.c_in, cells.join("; "));
+    }
 }
 
 fn print_table(r: &Report) {
