@@ -5,7 +5,7 @@
 //!   unit owns a vector of channels of 4 rows and sums each row's ≤ K partners in offset order, so no
 //!   atomics are needed (the software Vulkan driver has no f32 atomics) and results do not depend
 //!   on scheduling;
-//! - the weight gradient gives each block of `(offset, c_in, c_out)` a unit that walks that
+//! - the weight gradient gives each block of `(offset, c_in, c_out)` (up to 4 × 16) a unit that walks that
 //!   offset's pairs (cut into a fixed number of slices whose partial sums are added afterwards),
 //!   so it too is deterministic.
 //!
@@ -114,7 +114,8 @@ fn gather_conv_kernel<F: Float, N: Size>(
 }
 
 /// `partial[s, k, i, o] = Σ_{p ∈ slice s of offset k} x[input[p], i] · g[output[p], o]`. A unit
-/// owns an `N × N` block (`N` input channels by a vector of `N` output channels).
+/// owns an `N × (OUT·N)` block (`N` input channels by `OUT` vectors of output channels), so each
+/// pair's two row indices and input vector serve `OUT·N²` multiply-adds.
 #[cube(launch_unchecked)]
 fn weight_grad_kernel<F: Float, N: Size>(
     x: &[Vector<F, N>],
@@ -127,13 +128,15 @@ fn weight_grad_kernel<F: Float, N: Size>(
     c_out_vectors: usize,
     volume: usize,
     slices: usize,
+    #[comptime] out_per_unit: usize,
 ) {
     let pos = ABSOLUTE_POS;
-    if pos >= slices * volume * c_in_vectors * c_out_vectors {
+    let out_blocks = c_out_vectors / out_per_unit;
+    if pos >= slices * volume * c_in_vectors * out_blocks {
         terminate!();
     }
-    let o = pos % c_out_vectors;
-    let rest = pos / c_out_vectors;
+    let o = (pos % out_blocks) * out_per_unit;
+    let rest = pos / out_blocks;
     let i = rest % c_in_vectors;
     let rest = rest / c_in_vectors;
     let k = rest % volume;
@@ -144,23 +147,31 @@ fn weight_grad_kernel<F: Float, N: Size>(
     let to = begin + len * (slice + 1) / slices;
     let zero = Vector::<F, N>::new(F::new(0.0));
     let lanes = zero.vector_size();
-    let mut acc = Array::<Vector<F, N>>::new(lanes);
+    let acc_len = comptime!(lanes * out_per_unit);
+    let mut acc = Array::<Vector<F, N>>::new(acc_len);
     #[unroll]
-    for lane in 0..lanes {
-        acc[lane] = zero;
+    for a in 0..acc_len {
+        acc[a] = zero;
     }
     for p in from..to {
         let xs = x[input[p] as usize * c_in_vectors + i];
-        let gs = g[output[p] as usize * c_out_vectors + o];
+        let g_row = output[p] as usize * c_out_vectors + o;
         #[unroll]
-        for lane in 0..lanes {
-            acc[lane] += Vector::new(xs.extract(lane)) * gs;
+        for q in 0..out_per_unit {
+            let gs = g[g_row + q];
+            #[unroll]
+            for lane in 0..lanes {
+                acc[lane * out_per_unit + q] += Vector::new(xs.extract(lane)) * gs;
+            }
         }
     }
     let base = ((slice * volume + k) * c_in_vectors + i) * lanes;
     #[unroll]
     for lane in 0..lanes {
-        partial[(base + lane) * c_out_vectors + o] = acc[lane];
+        #[unroll]
+        for q in 0..out_per_unit {
+            partial[(base + lane) * c_out_vectors + o + q] = acc[lane * out_per_unit + q];
+        }
     }
 }
 
@@ -285,12 +296,13 @@ pub(crate) fn weight_grad(features: CubeTensor, grad_out: CubeTensor, map: &Kern
         [upload_u32(&client, &start), upload_u32(&client, &pairs.input), upload_u32(&client, &pairs.output)]
     });
     let vector = vector_size(&[c_in, c_out]);
-    // Enough units to fill a GPU when the weight is small (C=32: 27k values per slice), never
-    // slices shorter than a few dozen pairs. The slice count depends on the problem only.
-    let per_slice = volume * c_in * c_out;
-    let slices = (1 << 18).div_ceil(per_slice).clamp(1, (num_pairs / (32 * volume)).max(1));
+    let out_per_unit = [4, 2, 1].into_iter().find(|v| (c_out / vector) % v == 0).unwrap_or(1);
+    // Enough units to fill a GPU (2^16), never slices shorter than a few dozen pairs. The slice
+    // count depends on the problem only, so the sums' order does too.
+    let units_per_slice = volume * c_in * c_out / (vector * vector * out_per_unit);
+    let slices = (1usize << 16).div_ceil(units_per_slice).clamp(1, (num_pairs / (32 * volume)).max(1));
     let partial = empty_f32(&features, Shape::new([slices, volume, c_in, c_out]));
-    let (count, dim) = units(&client, slices * per_slice / (vector * vector));
+    let (count, dim) = units(&client, slices * units_per_slice);
     // Safety: units past the last block return; pair rows are rows of `features` and `grad_out`.
     unsafe {
         weight_grad_kernel::launch_unchecked::<f32>(
@@ -308,6 +320,7 @@ pub(crate) fn weight_grad(features: CubeTensor, grad_out: CubeTensor, map: &Kern
             c_out / vector,
             volume,
             slices,
+            out_per_unit,
         );
     }
     let summed = if slices == 1 { partial } else { CubeBackend::float_sum_dim(partial, 0) };

@@ -1,9 +1,19 @@
-//! What the workspace's benchmark binaries measure with: medians after warm-up, peak memory.
+//! What the workspace's benchmark binaries measure with: medians (and minima) after warm-up, peak
+//! memory.
 
+use serde::Serialize;
 use std::time::Instant;
 
-/// Median wall time of `runs` calls of `f` after `warmup` untimed calls, in milliseconds.
-pub fn median_ms(warmup: usize, runs: usize, mut f: impl FnMut()) -> f64 {
+/// Wall times of repeated calls, in milliseconds. On a shared or virtual machine the minimum is
+/// the steadier figure (other load only ever adds time); the median is the typical one.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct Timing {
+    pub median_ms: f64,
+    pub min_ms: f64,
+}
+
+/// Median and minimum wall time of `runs` calls of `f` after `warmup` untimed calls.
+pub fn time_ms(warmup: usize, runs: usize, mut f: impl FnMut()) -> Timing {
     for _ in 0..warmup {
         f();
     }
@@ -16,7 +26,13 @@ pub fn median_ms(warmup: usize, runs: usize, mut f: impl FnMut()) -> f64 {
         .collect();
     times.sort_by(f64::total_cmp);
     let m = times.len() / 2;
-    if times.len() % 2 == 1 { times[m] } else { (times[m - 1] + times[m]) / 2.0 }
+    let median_ms = if times.len() % 2 == 1 { times[m] } else { (times[m - 1] + times[m]) / 2.0 };
+    Timing { median_ms, min_ms: times[0] }
+}
+
+/// Median wall time of `runs` calls of `f` after `warmup` untimed calls, in milliseconds.
+pub fn median_ms(warmup: usize, runs: usize, f: impl FnMut()) -> f64 {
+    time_ms(warmup, runs, f).median_ms
 }
 
 /// Peak resident set size of this process (Linux `VmHWM`), in MiB; 0 where unavailable.

@@ -9,7 +9,7 @@ use anyhow::Context;
 use clap::{Parser, ValueEnum};
 use serde::Serialize;
 use sparse_conv::burn::tensor::{Device, DeviceKind, Distribution, Tensor};
-use sparse_conv::timing::{median_ms, peak_rss_mb};
+use sparse_conv::timing::{Timing, median_ms, peak_rss_mb, time_ms};
 use sparse_conv::cpu::{self, PairDirection};
 use sparse_conv::{CoordIndex, KernelMap, scene, sparse_conv};
 
@@ -22,7 +22,7 @@ enum Backend {
 }
 
 #[derive(Parser, Debug)]
-#[command(about = "Benchmark of pmunet's sparse convolution on a voxel scene")]
+#[command(about = "Benchmark of pmunet's sparse convolution on a voxel scene (medians, with minima)")]
 struct Args {
     /// Voxel coordinates, int32/int64 .npy, N×4 (batch, x, y, z) or N×3; default: built-in scene.
     #[arg(long)]
@@ -61,8 +61,12 @@ struct Args {
 struct Row {
     c_in: usize,
     c_out: usize,
+    /// Medians.
     fwd_ms: f64,
     fwd_bwd_ms: f64,
+    /// Minima of the same runs.
+    fwd_min_ms: f64,
+    fwd_bwd_min_ms: f64,
     fwd_gflops: f64,
     fwd_bwd_gflops: f64,
     /// The slice kernels alone (CPU backends): forward, feature gradient, weight gradient.
@@ -186,7 +190,8 @@ fn measure(args: &Args, scene_coords: &[sparse_conv::Coord]) -> anyhow::Result<R
     let sgemm = gemm_ceiling(2048, args.warmup, args.runs.min(5));
     let mut results = Vec::new();
     for &c in &args.channels {
-        let (fwd_ms, fwd_bwd_ms) = time_op(&device, &map, c, args.warmup, args.runs);
+        let (fwd, fwd_bwd) = time_op(&device, &map, c, args.warmup, args.runs);
+        let (fwd_ms, fwd_bwd_ms) = (fwd.median_ms, fwd_bwd.median_ms);
         let flop = 2.0 * pairs as f64 * c as f64 * c as f64;
         let kernel = cpu.then(|| kernel_times(&map, c, args.warmup, args.runs, fwd_ms, fwd_bwd_ms));
         results.push(Row {
@@ -194,6 +199,8 @@ fn measure(args: &Args, scene_coords: &[sparse_conv::Coord]) -> anyhow::Result<R
             c_out: c,
             fwd_ms,
             fwd_bwd_ms,
+            fwd_min_ms: fwd.min_ms,
+            fwd_bwd_min_ms: fwd_bwd.min_ms,
             fwd_gflops: flop / fwd_ms / 1e6,
             fwd_bwd_gflops: 3.0 * flop / fwd_bwd_ms / 1e6,
             kernel,
@@ -232,7 +239,8 @@ fn measure(args: &Args, scene_coords: &[sparse_conv::Coord]) -> anyhow::Result<R
             let coords = scene::tile_as_batch(scene_coords, scale);
             let index = CoordIndex::build(&coords)?;
             let map = Arc::new(KernelMap::submanifold(&coords, &index, args.kernel, 1));
-            let (fwd_ms, fwd_bwd_ms) = time_op(&device, &map, c, args.warmup, args.runs);
+            let (fwd, fwd_bwd) = time_op(&device, &map, c, args.warmup, args.runs);
+            let (fwd_ms, fwd_bwd_ms) = (fwd.median_ms, fwd_bwd.median_ms);
             let pairs = map.num_pairs();
             scaling.push(ScalePoint { scale, voxels: coords.len(), pairs, fwd_ms, fwd_bwd_ms, fwd_bwd_ms_per_mpair: fwd_bwd_ms / (pairs as f64 / 1e6) });
         }
@@ -254,12 +262,12 @@ fn measure(args: &Args, scene_coords: &[sparse_conv::Coord]) -> anyhow::Result<R
     Ok(report)
 }
 
-/// Median forward and forward+backward of the op through Burn (the backward seeded by `sum`).
-fn time_op(device: &Device, map: &Arc<KernelMap>, c: usize, warmup: usize, runs: usize) -> (f64, f64) {
+/// Forward and forward+backward of the op through Burn (the backward seeded by `sum`).
+fn time_op(device: &Device, map: &Arc<KernelMap>, c: usize, warmup: usize, runs: usize) -> (Timing, Timing) {
     let (n, volume) = (map.n_in(), map.volume());
     let x = Tensor::<2>::random([n, c], Distribution::Uniform(-1.0, 1.0), device);
     let w = Tensor::<3>::random([volume, c, c], Distribution::Uniform(-0.1, 0.1), device);
-    let fwd_ms = median_ms(warmup, runs, || {
+    let fwd = time_ms(warmup, runs, || {
         let out = sparse_conv(x.clone(), w.clone(), map);
         device.sync().expect("device sync");
         std::hint::black_box(out);
@@ -267,7 +275,7 @@ fn time_op(device: &Device, map: &Arc<KernelMap>, c: usize, warmup: usize, runs:
     let ad = device.clone().autodiff();
     let xa = Tensor::<2>::random([n, c], Distribution::Uniform(-1.0, 1.0), &ad).require_grad();
     let wa = Tensor::<3>::random([volume, c, c], Distribution::Uniform(-0.1, 0.1), &ad).require_grad();
-    let fwd_bwd_ms = median_ms(warmup, runs, || {
+    let fwd_bwd = time_ms(warmup, runs, || {
         let out = sparse_conv(xa.clone(), wa.clone(), map);
         let grads = out.sum().backward();
         let gx = xa.grad(&grads).expect("feature gradient");
@@ -275,7 +283,7 @@ fn time_op(device: &Device, map: &Arc<KernelMap>, c: usize, warmup: usize, runs:
         ad.sync().expect("device sync");
         std::hint::black_box((gx, gw));
     });
-    (fwd_ms, fwd_bwd_ms)
+    (fwd, fwd_bwd)
 }
 
 /// The three slice kernels timed on plain vectors, and the op's time around them.
@@ -339,16 +347,16 @@ fn print_speedup(reports: &[Report]) {
 
 fn print_table(r: &Report) {
     println!(
-        "backend {:?}, {} threads, {} voxels, {} pairs (k={}), median of {} runs",
+        "backend {:?}, {} threads, {} voxels, {} pairs (k={}), median (and min) of {} runs",
         r.backend, r.threads, r.voxels, r.pairs, r.kernel, r.runs
     );
     println!("submanifold map build: {:.2} ms", r.map_ms);
     println!("SGEMM ceiling ({0}×{0}×{0}, the kernels' GEMM): {1:.1} GFLOP/s", r.sgemm.size, r.sgemm.gflops);
-    println!("{:>6} {:>6} {:>10} {:>10} {:>14} {:>10}", "C_in", "C_out", "fwd ms", "GFLOP/s", "fwd+bwd ms", "GFLOP/s");
+    println!("{:>6} {:>6} {:>10} {:>9} {:>10} {:>14} {:>9} {:>10}", "C_in", "C_out", "fwd ms", "(min)", "GFLOP/s", "fwd+bwd ms", "(min)", "GFLOP/s");
     for row in &r.results {
         println!(
-            "{:>6} {:>6} {:>10.2} {:>10.1} {:>14.2} {:>10.1}",
-            row.c_in, row.c_out, row.fwd_ms, row.fwd_gflops, row.fwd_bwd_ms, row.fwd_bwd_gflops
+            "{:>6} {:>6} {:>10.2} {:>9.2} {:>10.1} {:>14.2} {:>9.2} {:>10.1}",
+            row.c_in, row.c_out, row.fwd_ms, row.fwd_min_ms, row.fwd_gflops, row.fwd_bwd_ms, row.fwd_bwd_min_ms, row.fwd_bwd_gflops
         );
     }
     for row in r.results.iter().filter(|row| row.kernel.is_some()) {
