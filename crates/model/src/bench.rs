@@ -84,22 +84,29 @@ pub enum Parts {
     Training,
 }
 
-/// Inference and training figures, `None` where not measured.
-type Figures = ([Option<f64>; 3], [Option<f64>; 2]);
+/// The figures of one run, `None` where its [`Parts`] left them out.
+#[derive(Default)]
+struct Figures {
+    forward_ms: Option<f64>,
+    detect_ms: Option<f64>,
+    train_step_ms: Option<f64>,
+    peak_forward_mib: Option<f64>,
+    peak_train_mib: Option<f64>,
+}
 
 /// Times `model` (built on `device.autodiff()`) on `batch`; inference runs on its `valid()` copy.
 fn measure<M: Detector>(mut model: M, batch: &Batch, device: &Device, parts: Parts, warmup: usize, runs: usize) -> Figures {
-    let (mut times, mut peaks) = ([None; 3], [None; 2]);
+    let mut figures = Figures::default();
     if parts != Parts::Training {
         let inner = device.clone().inner();
         let eval = model.valid();
-        times[0] = Some(median_ms(warmup, runs, || {
+        figures.forward_ms = Some(median_ms(warmup, runs, || {
             std::hint::black_box(eval.head_output(batch, &inner));
         }));
-        times[1] = Some(median_ms(0, runs.min(3), || {
+        figures.detect_ms = Some(median_ms(0, runs.min(3), || {
             std::hint::black_box(eval.detect(batch, &inner));
         }));
-        peaks[0] = Some(peak_rss_mb());
+        figures.peak_forward_mib = Some(peak_rss_mb());
     }
     if parts != Parts::Inference {
         let mut optim = AdamConfig::new().init();
@@ -108,17 +115,17 @@ fn measure<M: Detector>(mut model: M, batch: &Batch, device: &Device, parts: Par
             let grads = GradientsParams::from_grads(terms.total.backward(), &model);
             model = optim.step(1e-3, model.clone(), grads);
         };
-        times[2] = Some(median_ms(warmup, runs, &mut step));
-        peaks[1] = Some(peak_rss_mb());
+        figures.train_step_ms = Some(median_ms(warmup, runs, &mut step));
+        figures.peak_train_mib = Some(peak_rss_mb());
     }
-    (times, peaks)
+    figures
 }
 
 /// Benchmarks the model of `cfg` on `batch` on `device` (a plain device; training uses its
 /// autodiff twin).
 pub fn run(cfg: &ModelConfig, batch: &Batch, device: &Device, backend: &str, parts: Parts, warmup: usize, runs: usize) -> BenchReport {
     let ad = device.clone().autodiff();
-    let (parameters, ([forward_ms, detect_ms, train_step_ms], [peak_forward_mib, peak_train_mib])) = match cfg {
+    let (parameters, Figures { forward_ms, detect_ms, train_step_ms, peak_forward_mib, peak_train_mib }) = match cfg {
         ModelConfig::PersonMinkunet(c) => {
             let m = c.init(&ad);
             (m.num_params(), measure(m, batch, &ad, parts, warmup, runs))

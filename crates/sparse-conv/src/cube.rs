@@ -217,9 +217,10 @@ fn units(client: &Client, count: usize) -> (CubeCount, CubeDim) {
     (calculate_cube_count_elemwise(client, count, dim), dim)
 }
 
-/// The widest vector (4, 2 or 1 floats) that divides every channel count.
-fn vector_size(channels: &[usize]) -> usize {
-    [4, 2, 1].into_iter().find(|v| channels.iter().all(|c| c % v == 0)).unwrap_or(1)
+/// The widest of 4, 2 or 1 that divides every count: the vector width for channel counts, and the
+/// output vectors a weight-gradient unit takes on.
+fn widest_block(counts: &[usize]) -> usize {
+    [4, 2, 1].into_iter().find(|v| counts.iter().all(|c| c % v == 0)).unwrap_or(1)
 }
 
 /// The whole buffer of a contiguous tensor, as vectors of `vector` floats.
@@ -235,7 +236,7 @@ fn gather_conv(src: CubeTensor, weight: CubeTensor, table: &Handle, rows: usize,
         // Nothing to gather (and wgpu cannot bind an empty buffer).
         return zeros(&src, Shape::new([rows, c_out]));
     }
-    let vector = vector_size(&[c_red, c_out]);
+    let vector = widest_block(&[c_red, c_out]);
     let out = empty_f32(&src, Shape::new([rows, c_out]));
     let client = src.client.clone();
     let (count, dim) = units(&client, rows.div_ceil(ROWS_PER_UNIT) * c_out / vector);
@@ -295,8 +296,8 @@ pub(crate) fn weight_grad(features: CubeTensor, grad_out: CubeTensor, map: &Kern
         let start: Vec<u32> = pairs.start.iter().map(|&s| s as u32).collect();
         [upload_u32(&client, &start), upload_u32(&client, &pairs.input), upload_u32(&client, &pairs.output)]
     });
-    let vector = vector_size(&[c_in, c_out]);
-    let out_per_unit = [4, 2, 1].into_iter().find(|v| (c_out / vector) % v == 0).unwrap_or(1);
+    let vector = widest_block(&[c_in, c_out]);
+    let out_per_unit = widest_block(&[c_out / vector]);
     // Enough units to fill a GPU (2^16), never slices shorter than a few dozen pairs. The slice
     // count depends on the problem only, so the sums' order does too.
     let units_per_slice = volume * c_in * c_out / (vector * vector * out_per_unit);
