@@ -10,12 +10,14 @@
 //! - [`tensor`]: [`SparseTensor`], features with coordinates and a shared map cache.
 //! - [`modules`]: convolutions, batch norm, linear and U-Net blocks.
 //! - [`scene`]: voxel scenes for benchmarks (a synthetic LiDAR-like scene, `.npy` files).
+//! - [`heap`]: the binaries' malloc policy (freed tensor memory stays in the process).
 //! - [`timing`]: medians and peak memory for the benchmark binaries.
 
 pub mod backend;
 pub mod coords;
 pub mod cpu;
 mod cube;
+pub mod heap;
 pub mod kernel_map;
 pub mod modules;
 pub mod op;

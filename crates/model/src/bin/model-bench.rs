@@ -68,6 +68,7 @@ struct Args {
 }
 
 fn main() -> anyhow::Result<()> {
+    sparse_conv::heap::retain_freed_memory();
     let args = Args::parse();
     anyhow::ensure!(args.batch >= 1 && args.runs >= 1, "--batch and --runs must be at least 1");
     rayon::ThreadPoolBuilder::new().num_threads(args.threads).build_global().context("configuring the thread pool")?;

@@ -134,6 +134,7 @@ struct Report {
 }
 
 fn main() -> anyhow::Result<()> {
+    sparse_conv::heap::retain_freed_memory();
     // The GEMM ceiling is measured like the kernels run: one single-threaded GEMM per rayon
     // thread. matrixmultiply reads this once, at its first call, which comes later.
     // SAFETY: no other thread exists yet.

@@ -1,0 +1,28 @@
+//! The process's heap policy for tensor-sized buffers.
+//!
+//! glibc's malloc serves a large block with its own `mmap` (above a threshold that starts at
+//! 128 KiB) and gives it back to the kernel when freed, and trims the heap's free top above
+//! 128 KiB. A training step allocates and frees feature maps of megabytes hundreds of times, so
+//! every step faulted each of them in again, page by page, zeroed by the kernel: measured on
+//! the standard scene, a MinkUNet training step at batch 2 took 7.8 s with 42 % of the process's
+//! time in the kernel, and 5.1 s once freed memory stays in the heap. Peak RSS is unchanged (the
+//! step's peak is the heap's peak either way).
+
+/// Largest block glibc lets `mallopt` keep in the heap (`DEFAULT_MMAP_THRESHOLD_MAX` on 64-bit).
+#[cfg(all(target_os = "linux", target_env = "gnu"))]
+const MMAP_THRESHOLD: libc::c_int = 32 << 20;
+
+/// Keeps freed tensor memory in the process for reuse instead of returning it to the kernel.
+/// Binaries call it first thing in `main`; a no-op off glibc. Returns whether glibc took it.
+pub fn retain_freed_memory() -> bool {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    {
+        // SAFETY: mallopt only sets malloc's parameters (under its own lock); it returns 1 when
+        // it accepted the value.
+        unsafe { libc::mallopt(libc::M_MMAP_THRESHOLD, MMAP_THRESHOLD) == 1 && libc::mallopt(libc::M_TRIM_THRESHOLD, libc::c_int::MAX) == 1 }
+    }
+    #[cfg(not(all(target_os = "linux", target_env = "gnu")))]
+    {
+        false
+    }
+}
