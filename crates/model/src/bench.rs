@@ -3,6 +3,9 @@
 //! and the peak resident memory (Linux `VmHWM`).
 
 
+use std::cell::Cell;
+use std::time::Instant;
+
 use data_jrdb::Batch;
 use serde::Serialize;
 use sparse_conv::burn::module::Module;
@@ -66,11 +69,28 @@ pub struct BenchReport {
     pub peak_forward_mib: Option<f64>,
     /// Peak RSS after the training steps (the process's peak), MiB.
     pub peak_train_mib: Option<f64>,
+    /// Mean time per inference forward inside the CPU kernels, by kind (zero on GPUs).
+    pub forward_kernels: Option<KernelTimes>,
+    /// Mean time per training step inside the CPU kernels, by kind (zero on GPUs).
+    pub train_kernels: Option<KernelTimes>,
+    /// Mean wall time of a training step's phases (on GPUs, when their work was queued).
+    pub train_phases: Option<StepPhases>,
     /// Timed runs per figure.
     pub runs: usize,
 }
 
-pub use sparse_conv::timing::{median_ms, peak_rss_mb};
+pub use sparse_conv::timing::{KernelTimes, median_ms, peak_rss_mb};
+
+/// Where a training step's time goes, mean per step.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct StepPhases {
+    /// Forward and loss, with the autodiff graph recorded.
+    pub forward_ms: f64,
+    /// Backward, to the parameters' gradients.
+    pub backward_ms: f64,
+    /// Adam's update of every parameter.
+    pub optimizer_ms: f64,
+}
 
 /// Which figures a run measures.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -92,6 +112,20 @@ struct Figures {
     train_step_ms: Option<f64>,
     peak_forward_mib: Option<f64>,
     peak_train_mib: Option<f64>,
+    forward_kernels: Option<KernelTimes>,
+    train_kernels: Option<KernelTimes>,
+    train_phases: Option<StepPhases>,
+}
+
+/// Median of `runs` calls of `f` after `warmup` untimed ones, and the mean kernel times of the
+/// timed calls.
+fn timed_with_kernels(warmup: usize, runs: usize, mut f: impl FnMut()) -> (f64, KernelTimes) {
+    for _ in 0..warmup {
+        f();
+    }
+    let before = KernelTimes::now();
+    let ms = median_ms(0, runs, f);
+    (ms, KernelTimes::now().per_run_since(&before, runs))
 }
 
 /// Times `model` (built on `device.autodiff()`) on `batch`; inference runs on its `valid()` copy.
@@ -100,9 +134,10 @@ fn measure<M: Detector>(mut model: M, batch: &Batch, device: &Device, parts: Par
     if parts != Parts::Training {
         let inner = device.clone().inner();
         let eval = model.valid();
-        figures.forward_ms = Some(median_ms(warmup, runs, || {
+        let (ms, kernels) = timed_with_kernels(warmup, runs, || {
             std::hint::black_box(eval.head_output(batch, &inner));
-        }));
+        });
+        (figures.forward_ms, figures.forward_kernels) = (Some(ms), Some(kernels));
         figures.detect_ms = Some(median_ms(0, runs.min(3), || {
             std::hint::black_box(eval.detect(batch, &inner));
         }));
@@ -110,12 +145,28 @@ fn measure<M: Detector>(mut model: M, batch: &Batch, device: &Device, parts: Par
     }
     if parts != Parts::Inference {
         let mut optim = AdamConfig::new().init();
+        let phases = Cell::new([0.0f64; 3]);
         let mut step = || {
+            let t = Instant::now();
             let terms = model.clone().loss(batch, device);
+            let t_forward = t.elapsed();
             let grads = GradientsParams::from_grads(terms.total.backward(), &model);
+            let t_backward = t.elapsed();
             model = optim.step(1e-3, model.clone(), grads);
+            let mut sums = phases.get();
+            for (sum, d) in sums.iter_mut().zip([t_forward, t_backward - t_forward, t.elapsed() - t_backward]) {
+                *sum += d.as_secs_f64() * 1e3;
+            }
+            phases.set(sums);
         };
-        figures.train_step_ms = Some(median_ms(warmup, runs, &mut step));
+        for _ in 0..warmup {
+            step();
+        }
+        phases.set([0.0; 3]);
+        let (ms, kernels) = timed_with_kernels(0, runs, &mut step);
+        (figures.train_step_ms, figures.train_kernels) = (Some(ms), Some(kernels));
+        let [forward_ms, backward_ms, optimizer_ms] = phases.get().map(|s| s / runs as f64);
+        figures.train_phases = Some(StepPhases { forward_ms, backward_ms, optimizer_ms });
         figures.peak_train_mib = Some(peak_rss_mb());
     }
     figures
@@ -125,7 +176,7 @@ fn measure<M: Detector>(mut model: M, batch: &Batch, device: &Device, parts: Par
 /// autodiff twin).
 pub fn run(cfg: &ModelConfig, batch: &Batch, device: &Device, backend: &str, parts: Parts, warmup: usize, runs: usize) -> BenchReport {
     let ad = device.clone().autodiff();
-    let (parameters, Figures { forward_ms, detect_ms, train_step_ms, peak_forward_mib, peak_train_mib }) = match cfg {
+    let (parameters, Figures { forward_ms, detect_ms, train_step_ms, peak_forward_mib, peak_train_mib, forward_kernels, train_kernels, train_phases }) = match cfg {
         ModelConfig::PersonMinkunet(c) => {
             let m = c.init(&ad);
             (m.num_params(), measure(m, batch, &ad, parts, warmup, runs))
@@ -147,6 +198,9 @@ pub fn run(cfg: &ModelConfig, batch: &Batch, device: &Device, backend: &str, par
         train_step_ms,
         peak_forward_mib,
         peak_train_mib,
+        forward_kernels,
+        train_kernels,
+        train_phases,
         runs,
     }
 }

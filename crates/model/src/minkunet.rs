@@ -6,7 +6,7 @@ use burn::tensor::Device;
 use sparse_conv::SparseTensor;
 use sparse_conv::modules::{
     ConvBnRelu, ConvBnReluConfig, DeconvBnRelu, DeconvBnReluConfig, ResidualBlock, ResidualBlockConfig, SparseBatchNorm,
-    SparseBatchNormConfig, SubmanifoldConv3d, SubmanifoldConv3dConfig, relu,
+    SparseBatchNormConfig, SubmanifoldConv3d, SubmanifoldConv3dConfig,
 };
 
 /// Shape of the backbone: `channels = [stem, down_1..down_n, up_1..up_n]` (2n + 1 entries), each
@@ -123,7 +123,7 @@ impl MinkUNet {
     pub fn forward_levels(&self, x: SparseTensor) -> UNetLevels {
         let mut x = x;
         for (conv, norm) in self.stem.iter().zip(&self.stem_norms) {
-            x = relu(norm.forward(conv.forward(x)));
+            x = norm.forward_relu(conv.forward(x));
         }
         let mut down = vec![x];
         for stage in &self.down {

@@ -22,6 +22,7 @@ use burn::tensor::{DType, Shape, TensorData};
 use crate::cpu::{self, PairDirection};
 use crate::cube;
 use crate::kernel_map::KernelMap;
+use crate::timing::{Kernel, in_kernel};
 
 /// A backend that can run the sparse convolution of a [`KernelMap`].
 ///
@@ -132,7 +133,7 @@ fn weight_slice<B: Backend>(weight: FloatTensor<B>, k: usize, device: &burn::bac
 /// Read access to a CPU backend's float values, without a copy when the tensor is contiguous
 /// (reading through `into_data` copies every tensor autodiff also holds, element by element on
 /// ndarray).
-trait HostFloats: Backend {
+pub(crate) trait HostFloats: Backend {
     fn host_f32(t: &FloatTensor<Self>) -> Cow<'_, [f32]>;
     fn host_f64(t: &FloatTensor<Self>) -> Cow<'_, [f64]>;
 }
@@ -190,33 +191,33 @@ fn on_cpu<B: HostFloats>(
 fn cpu_forward<B: HostFloats>(features: FloatTensor<B>, weight: FloatTensor<B>, map: &KernelMap) -> FloatTensor<B> {
     let (c_in, c_out) = (weight.shape()[1], weight.shape()[2]);
     check_shapes(&features.shape(), &weight.shape(), map.n_in(), map.volume());
-    on_cpu::<B>(
+    in_kernel(Kernel::ConvForward, || on_cpu::<B>(
         [&features, &weight],
         [map.n_out(), c_out],
         |x, w| cpu::pair_conv(x, c_in, w, c_out, map.n_out(), PairDirection::Forward, map.pairs(), map.identity_offset()),
         |x, w| cpu::pair_conv(x, c_in, w, c_out, map.n_out(), PairDirection::Forward, map.pairs(), map.identity_offset()),
-    )
+    ))
 }
 
 fn cpu_input_grad<B: HostFloats>(grad_out: FloatTensor<B>, weight: FloatTensor<B>, map: &KernelMap) -> FloatTensor<B> {
     let (c_in, c_out) = (weight.shape()[1], weight.shape()[2]);
-    on_cpu::<B>(
+    in_kernel(Kernel::ConvInputGrad, || on_cpu::<B>(
         [&grad_out, &weight],
         [map.n_in(), c_in],
         |g, w| cpu::pair_conv(g, c_out, w, c_in, map.n_in(), PairDirection::Backward, map.pairs(), map.identity_offset()),
         |g, w| cpu::pair_conv(g, c_out, w, c_in, map.n_in(), PairDirection::Backward, map.pairs(), map.identity_offset()),
-    )
+    ))
 }
 
 fn cpu_weight_grad<B: HostFloats>(features: FloatTensor<B>, grad_out: FloatTensor<B>, map: &KernelMap) -> FloatTensor<B> {
     let (c_in, c_out) = (features.shape()[1], grad_out.shape()[1]);
     let pairs = map.pairs();
-    let out = on_cpu::<B>(
+    let out = in_kernel(Kernel::ConvWeightGrad, || on_cpu::<B>(
         [&features, &grad_out],
         [map.volume(), c_in * c_out],
         |x, g| cpu::weight_grad(x, c_in, g, c_out, pairs, map.identity_offset()),
         |x, g| cpu::weight_grad(x, c_in, g, c_out, pairs, map.identity_offset()),
-    );
+    ));
     B::float_reshape(out, Shape::new([map.volume(), c_in, c_out]))
 }
 

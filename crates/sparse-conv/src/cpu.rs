@@ -13,7 +13,18 @@ use crate::kernel_map::OffsetPairs;
 const GRAD_CHUNK: usize = 2048;
 
 /// A float type the kernels run on, with its GEMM.
-pub trait Element: Copy + Send + Sync + Default + std::ops::AddAssign + 'static {
+pub trait Element:
+    Copy
+    + Send
+    + Sync
+    + Default
+    + PartialOrd
+    + std::ops::AddAssign
+    + std::ops::Add<Output = Self>
+    + std::ops::Sub<Output = Self>
+    + std::ops::Mul<Output = Self>
+    + 'static
+{
     /// `C = A·B + beta·C` with arbitrary strides (matrixmultiply's contract).
     ///
     /// # Safety
@@ -27,6 +38,8 @@ pub trait Element: Copy + Send + Sync + Default + std::ops::AddAssign + 'static 
     );
     const ZERO: Self;
     const ONE: Self;
+    fn to_f64(self) -> f64;
+    fn from_f64(v: f64) -> Self;
 }
 
 impl Element for f32 {
@@ -40,6 +53,12 @@ impl Element for f32 {
     }
     const ZERO: f32 = 0.0;
     const ONE: f32 = 1.0;
+    fn to_f64(self) -> f64 {
+        self as f64
+    }
+    fn from_f64(v: f64) -> f32 {
+        v as f32
+    }
 }
 
 impl Element for f64 {
@@ -53,6 +72,12 @@ impl Element for f64 {
     }
     const ZERO: f64 = 0.0;
     const ONE: f64 = 1.0;
+    fn to_f64(self) -> f64 {
+        self
+    }
+    fn from_f64(v: f64) -> f64 {
+        v
+    }
 }
 
 /// Largest `m·k + k·n` of one GEMM call that matrixmultiply 0.3 runs on the calling thread: from

@@ -6,6 +6,7 @@
 //! - [`cpu`]: the op's math over slices (forward, feature and weight gradients).
 //! - `cube`: the op's CubeCL kernels for GPUs (wgpu/Vulkan, CUDA, ROCm).
 //! - [`backend`]: the Burn backend extension and its `Autodiff` backward.
+//! - [`cpu_norm`], [`batch_norm`]: batch norm (+ ReLU) as one op with its own backward.
 //! - [`op`]: [`sparse_conv`] on Burn tensors.
 //! - [`tensor`]: [`SparseTensor`], features with coordinates and a shared map cache.
 //! - [`modules`]: convolutions, batch norm, linear and U-Net blocks.
@@ -14,8 +15,10 @@
 //! - [`timing`]: medians and peak memory for the benchmark binaries.
 
 pub mod backend;
+pub mod batch_norm;
 pub mod coords;
 pub mod cpu;
+pub mod cpu_norm;
 mod cube;
 pub mod heap;
 pub mod kernel_map;
@@ -26,6 +29,7 @@ pub mod tensor;
 pub mod timing;
 
 pub use backend::SparseConvBackend;
+pub use batch_norm::{BatchNormBackend, batch_norm_eval, batch_norm_train};
 pub use coords::{Coord, CoordError, CoordIndex};
 pub use kernel_map::{KernelMap, MapKind, NeighborTable};
 pub use op::sparse_conv;

@@ -5,6 +5,7 @@ use std::sync::{Arc, Mutex};
 
 use burn::tensor::Tensor;
 
+use crate::timing::{Kernel, in_kernel};
 use crate::coords::{Coord, CoordError, CoordIndex};
 use crate::kernel_map::{KernelMap, MapKind};
 
@@ -99,8 +100,10 @@ impl SparseTensor {
         if let Some(map) = self.cache.get(key) {
             return map;
         }
-        let index = self.cache.index(self.stride, &self.coords);
-        let map = Arc::new(KernelMap::submanifold(&self.coords, &index, kernel, self.stride));
+        let map = in_kernel(Kernel::MapBuild, || {
+            let index = self.cache.index(self.stride, &self.coords);
+            Arc::new(KernelMap::submanifold(&self.coords, &index, kernel, self.stride))
+        });
         self.cache.insert(key, map.clone());
         map
     }
@@ -113,7 +116,7 @@ impl SparseTensor {
         if let Some(map) = self.cache.get(key) {
             return (map, self.cache.level(out_stride).expect("a cached down map has its level"));
         }
-        let (map, coords) = KernelMap::down(&self.coords, kernel, self.stride)
+        let (map, coords) = in_kernel(Kernel::MapBuild, || KernelMap::down(&self.coords, kernel, self.stride))
             .expect("coordinates of a sparse tensor are validated and on their level's grid");
         let (map, coords) = (Arc::new(map), Arc::<[Coord]>::from(coords));
         self.cache.insert(key, map.clone());
@@ -144,7 +147,7 @@ impl SparseTensor {
                 self.stride
             )
         });
-        let map = Arc::new(down.transposed());
+        let map = Arc::new(in_kernel(Kernel::MapBuild, || down.transposed()));
         self.cache.insert(up_key, map.clone());
         (map, coords, fine)
     }

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::{Parser, ValueEnum};
-use model::bench::{Parts, bench_batch, run};
+use model::bench::{KernelTimes, Parts, bench_batch, run};
 use model::{CenterPointConfig, ModelConfig, PersonMinkUNetConfig};
 use sparse_conv::burn::tensor::{Device, DeviceKind};
 use sparse_conv::scene;
@@ -99,12 +99,32 @@ fn main() -> anyhow::Result<()> {
         );
         if let (Some(forward), Some(detect), Some(peak)) = (r.forward_ms, r.detect_ms, r.peak_forward_mib) {
             println!("  inference forward   {forward:>10.1} ms   (detect incl. decode + NMS {detect:.1} ms)");
+            print_kernels(r.forward_kernels, forward);
             println!("  peak RSS            {peak:>10.0} MiB after inference");
         }
         if let (Some(step), Some(peak)) = (r.train_step_ms, r.peak_train_mib) {
             println!("  training step       {step:>10.1} ms   (forward, loss, backward, Adam)");
+            if let Some(p) = r.train_phases {
+                println!("    forward + loss {:.1} ms, backward {:.1} ms, Adam {:.1} ms (means)", p.forward_ms, p.backward_ms, p.optimizer_ms);
+            }
+            print_kernels(r.train_kernels, step);
             println!("  peak RSS            {peak:>10.0} MiB after training");
         }
     }
     Ok(())
+}
+
+/// The mean time inside the CPU kernels, and the rest of the median wall time.
+fn print_kernels(k: Option<KernelTimes>, wall_ms: f64) {
+    let Some(k) = k.filter(|k| k.total_ms() > 0.0) else { return };
+    println!(
+        "    in the kernels {:.1} ms (maps {:.1}, conv fwd {:.1}, input grad {:.1}, weight grad {:.1}, batch norm {:.1}); outside them {:.1} ms",
+        k.total_ms(),
+        k.map_build_ms,
+        k.conv_forward_ms,
+        k.conv_input_grad_ms,
+        k.conv_weight_grad_ms,
+        k.batch_norm_ms,
+        wall_ms - k.total_ms()
+    );
 }

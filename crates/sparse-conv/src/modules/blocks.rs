@@ -36,7 +36,7 @@ impl ConvBnReluConfig {
 
 impl ConvBnRelu {
     pub fn forward(&self, x: SparseTensor) -> SparseTensor {
-        relu(self.norm.forward(self.conv.forward(x)))
+        self.norm.forward_relu(self.conv.forward(x))
     }
 }
 
@@ -66,7 +66,7 @@ impl DeconvBnReluConfig {
 
 impl DeconvBnRelu {
     pub fn forward(&self, x: SparseTensor) -> SparseTensor {
-        relu(self.norm.forward(self.conv.forward(x)))
+        self.norm.forward_relu(self.conv.forward(x))
     }
 }
 
@@ -115,7 +115,7 @@ impl ResidualBlockConfig {
 
 impl ResidualBlock {
     pub fn forward(&self, x: SparseTensor) -> SparseTensor {
-        let main = relu(self.norm1.forward(self.conv1.forward(x.clone())));
+        let main = self.norm1.forward_relu(self.conv1.forward(x.clone()));
         let main = self.norm2.forward(self.conv2.forward(main));
         let skip = match &self.shortcut {
             Some(shortcut) => shortcut.norm.forward(shortcut.conv.forward(x)),

@@ -3,9 +3,10 @@
 use burn::config::Config;
 use burn::module::Module;
 use burn::nn::{BatchNorm, BatchNormConfig};
-use burn::tensor::Device;
+use burn::tensor::{Device, Tensor};
 
 use crate::SparseTensor;
+use crate::batch_norm::{batch_norm_eval, batch_norm_train};
 
 /// Configuration of a [`SparseBatchNorm`]; the defaults are PyTorch's `BatchNorm1d` (spec §1.6).
 #[derive(Config, Debug)]
@@ -18,7 +19,9 @@ pub struct SparseBatchNormConfig {
 }
 
 /// Batch norm with every voxel of the batch as one sample: batch statistics and running-stat
-/// updates on an autodiff device, running statistics otherwise (Burn's train/eval switch).
+/// updates on an autodiff device with the layer's training flag on, running statistics
+/// otherwise (Burn's `BatchNorm` switch, whose parameters and record it keeps). It runs as the
+/// fused op of [`crate::batch_norm`], with the ReLU after it folded in by [`Self::forward_relu`].
 #[derive(Module, Debug)]
 pub struct SparseBatchNorm {
     pub inner: BatchNorm,
@@ -34,7 +37,36 @@ impl SparseBatchNormConfig {
 
 impl SparseBatchNorm {
     pub fn forward(&self, x: SparseTensor) -> SparseTensor {
-        let features = self.inner.forward(x.features());
+        let features = self.features(x.features(), false);
         x.with_features(features)
+    }
+
+    /// `relu(self.forward(x))` in one op.
+    pub fn forward_relu(&self, x: SparseTensor) -> SparseTensor {
+        let features = self.features(x.features(), true);
+        x.with_features(features)
+    }
+
+    fn features(&self, x: Tensor<2>, relu: bool) -> Tensor<2> {
+        let bn = &self.inner;
+        let [rows, channels] = x.dims();
+        assert_eq!(channels, bn.gamma.dims()[0], "batch norm of {} channels got features of {channels}", bn.gamma.dims()[0]);
+        let device = x.device();
+        if !(device.is_autodiff() && bn.training.is_enabled()) {
+            let mean = bn.running_mean.value().to_device(&device);
+            let var = bn.running_var.value().to_device(&device);
+            return batch_norm_eval(x, mean, var, bn.gamma.val(), bn.beta.val(), bn.epsilon, relu);
+        }
+        let (out, stats) = batch_norm_train(x, bn.gamma.val(), bn.beta.val(), bn.epsilon, relu);
+        // An empty batch has no statistics; the running averages keep their values.
+        if rows > 0 {
+            let stat = |i: usize| stats.clone().slice([i..i + 1, 0..channels]).reshape([channels]).detach();
+            let blend = |running: Tensor<1>, batch: Tensor<1>| {
+                running.mul_scalar(1.0 - bn.momentum).add(batch.mul_scalar(bn.momentum)).detach()
+            };
+            bn.running_mean.update(blend(bn.running_mean.value_sync().to_device(&device), stat(0)));
+            bn.running_var.update(blend(bn.running_var.value_sync().to_device(&device), stat(1)));
+        }
+        out
     }
 }
