@@ -10,7 +10,7 @@ use rayon::prelude::*;
 use crate::kernel_map::OffsetPairs;
 
 /// Pairs per partial sum of the weight gradient.
-const GRAD_CHUNK: usize = 2048;
+pub(crate) const GRAD_CHUNK: usize = 2048;
 
 /// A float type the kernels run on, with its GEMM.
 pub trait Element:
@@ -40,6 +40,11 @@ pub trait Element:
     const ONE: Self;
     fn to_f64(self) -> f64;
     fn from_f64(v: f64) -> Self;
+
+    /// [`weight_grad`] by a kernel specific to this type and CPU, where one runs.
+    fn weight_grad_native(_x: &[Self], _c_in: usize, _grad_out: &[Self], _c_out: usize, _pairs: &OffsetPairs) -> Option<Vec<Self>> {
+        None
+    }
 }
 
 impl Element for f32 {
@@ -58,6 +63,11 @@ impl Element for f32 {
     }
     fn from_f64(v: f64) -> f32 {
         v as f32
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    fn weight_grad_native(x: &[f32], c_in: usize, grad_out: &[f32], c_out: usize, pairs: &OffsetPairs) -> Option<Vec<f32>> {
+        crate::avx512::available().then(|| crate::avx512::weight_grad(x, c_in, grad_out, c_out, pairs))
     }
 }
 
@@ -144,6 +154,9 @@ pub fn weight_grad<T: Element>(
     pairs: &OffsetPairs,
     identity: Option<usize>,
 ) -> Vec<T> {
+    if let Some(grad) = T::weight_grad_native(x, c_in, grad_out, c_out, pairs) {
+        return grad;
+    }
     let volume = pairs.start.len() - 1;
     let block = c_in * c_out;
     // Chunks are listed offset by offset; `first_chunk[k]..first_chunk[k + 1]` are offset k's.

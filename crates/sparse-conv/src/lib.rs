@@ -3,7 +3,8 @@
 //!
 //! - [`coords`]: batch-indexed voxel coordinates and their hash index.
 //! - [`kernel_map`]: rulebooks for submanifold, down-sampling and transposed convolutions.
-//! - [`cpu`]: the op's math over slices (forward, feature and weight gradients).
+//! - [`cpu`]: the op's math over slices (forward, feature and weight gradients); `avx512`: the
+//!   weight gradient's f32 kernel for CPUs with AVX-512.
 //! - `cube`: the op's CubeCL kernels for GPUs (wgpu/Vulkan, CUDA, ROCm).
 //! - [`backend`]: the Burn backend extension and its `Autodiff` backward.
 //! - [`cpu_norm`], [`batch_norm`]: batch norm (+ ReLU) as one op with its own backward.
@@ -14,6 +15,8 @@
 //! - [`heap`]: the binaries' malloc policy (freed tensor memory stays in the process).
 //! - [`timing`]: medians and peak memory for the benchmark binaries.
 
+#[cfg(target_arch = "x86_64")]
+mod avx512;
 pub mod backend;
 pub mod batch_norm;
 pub mod coords;

@@ -202,6 +202,8 @@ pub fn targets() -> Vec<Target> {
     let mut targets = vec![
         Target { name: "flex", device: Device::flex(), dtype: DType::F64, tol: 1e-12 },
         Target { name: "ndarray", device: Device::ndarray(), dtype: DType::F64, tol: 1e-12 },
+        // f32 on the CPU runs the type-specific kernels (AVX-512 weight gradient where present).
+        Target { name: "flex f32", device: Device::flex(), dtype: DType::F32, tol: 1e-5 },
     ];
     if let Some(device) = wgpu_device() {
         targets.push(Target { name: "wgpu", device, dtype: DType::F32, tol: 1e-5 });
