@@ -46,6 +46,8 @@ fn mask(cols: usize, v: usize) -> __mmask16 {
 /// # Safety
 /// AVX-512F; `xs[p]` readable up to `i0 + R`, `gs[p]` up to `j0 + cols`, `out` rows of `ld`
 /// floats writable at `i0.., j0..`.
+// The register tile is indexed by constant-bounded loops that unroll into registers.
+#[allow(clippy::needless_range_loop)]
 #[target_feature(enable = "avx512f")]
 unsafe fn pair_outer_products<const R: usize>(xs: &[*const f32], gs: &[*const f32], i0: usize, j0: usize, cols: usize, out: *mut f32, ld: usize) {
     unsafe {
