@@ -127,12 +127,10 @@ pub fn param_grads<T: Element>(x: &[T], grad_out: &[T], stats: &[T], gamma: &[T]
         let mut grads = grads.chunks_exact(c);
         block_sums(c, rows.chunks_exact(c), |row, dgamma, dbeta| {
             let grad = grads.next().expect("as many gradient rows as input rows");
-            for ((((((&v, &g), &a), &b), &m), sg), sb) in
-                row.iter().zip(grad).zip(&a).zip(&b).zip(mean).zip(dgamma.iter_mut()).zip(dbeta.iter_mut())
-            {
-                let dz = masked(v, a, b, g, relu);
-                *sb += dz;
-                *sg += dz * (v - m);
+            if relu {
+                param_row::<T, true>(row, grad, &a, &b, mean, dgamma, dbeta);
+            } else {
+                param_row::<T, false>(row, grad, &a, &b, mean, dgamma, dbeta);
             }
         })
     }));
@@ -142,8 +140,32 @@ pub fn param_grads<T: Element>(x: &[T], grad_out: &[T], stats: &[T], gamma: &[T]
 
 /// `dy` through the ReLU's mask: zero where `z = x·a + b ≤ 0`.
 #[inline(always)]
-fn masked<T: Element>(x: T, a: T, b: T, dy: T, relu: bool) -> T {
-    if relu && x * a + b <= T::ZERO { T::ZERO } else { dy }
+fn masked<T: Element, const RELU: bool>(x: T, a: T, b: T, dy: T) -> T {
+    if RELU && x * a + b <= T::ZERO { T::ZERO } else { dy }
+}
+
+/// One row's terms of [`param_grads`]' sums. The slices are cut to one length and `RELU` is a
+/// constant, so the loop compiles to straight vector code.
+#[inline(always)]
+fn param_row<T: Element, const RELU: bool>(row: &[T], grad: &[T], a: &[T], b: &[T], mean: &[T], dgamma: &mut [T], dbeta: &mut [T]) {
+    let c = row.len();
+    let (grad, a, b, mean, dgamma, dbeta) = (&grad[..c], &a[..c], &b[..c], &mean[..c], &mut dgamma[..c], &mut dbeta[..c]);
+    for j in 0..c {
+        let dz = masked::<T, RELU>(row[j], a[j], b[j], grad[j]);
+        dbeta[j] += dz;
+        dgamma[j] += dz * (row[j] - mean[j]);
+    }
+}
+
+/// One row of [`input_grad`]: `dx = a·dz + c0 + c1·(x − mean)`; as [`param_row`].
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn input_grad_row<T: Element, const RELU: bool>(row: &[T], grad: &[T], a: &[T], b: &[T], c0: &[T], c1: &[T], mean: &[T], dst: &mut [MaybeUninit<T>]) {
+    let c = row.len();
+    let (grad, a, b, c0, c1, mean, dst) = (&grad[..c], &a[..c], &b[..c], &c0[..c], &c1[..c], &mean[..c], &mut dst[..c]);
+    for j in 0..c {
+        dst[j].write(a[j] * masked::<T, RELU>(row[j], a[j], b[j], grad[j]) + c0[j] + c1[j] * (row[j] - mean[j]));
+    }
 }
 
 /// The input gradient. With `batch_stats` (training: the statistics are the batch's own)
@@ -182,9 +204,10 @@ pub fn input_grad<T: Element>(
         let rows = x[start..][..out.len()].chunks_exact(c);
         let grads = grad_out[start..][..out.len()].chunks_exact(c);
         for ((row, grad), dst) in rows.zip(grads).zip(out.chunks_exact_mut(c)) {
-            let per_channel = a.iter().zip(&b).zip(&c0).zip(&c1).zip(mean);
-            for (((&v, &g), d), ((((&a, &b), &c0), &c1), &m)) in row.iter().zip(grad).zip(dst.iter_mut()).zip(per_channel) {
-                d.write(a * masked(v, a, b, g, relu) + c0 + c1 * (v - m));
+            if relu {
+                input_grad_row::<T, true>(row, grad, &a, &b, &c0, &c1, mean, dst);
+            } else {
+                input_grad_row::<T, false>(row, grad, &a, &b, &c0, &c1, mean, dst);
             }
         }
     })
