@@ -3,6 +3,7 @@
 
 use data_jrdb::Batch;
 use sparse_conv::SparseTensor;
+use sparse_conv::modules::per_voxel_linear;
 use sparse_conv::burn::module::Module;
 use sparse_conv::burn::nn::{Linear, LinearConfig};
 use sparse_conv::burn::tensor::{Device, Tensor, TensorData};
@@ -63,7 +64,7 @@ impl PersonMinkUNet {
     /// Head output for every voxel of the batch, `[M, 2·bins + 7]` (layout in [`crate::box_coder`]).
     pub fn forward(&self, batch: &Batch, device: &Device) -> Tensor<2> {
         let x = self.backbone.forward(Self::input(batch, device));
-        self.head.forward(x.into_features())
+        per_voxel_linear(&self.head, &x)
     }
 }
 

@@ -3,9 +3,9 @@
 use burn::config::Config;
 use burn::module::Module;
 use burn::nn::{Linear, LinearConfig};
-use burn::tensor::Device;
+use burn::tensor::{Device, Tensor};
 
-use crate::SparseTensor;
+use crate::{SparseTensor, sparse_conv};
 
 /// Configuration of a [`SparseLinear`].
 #[derive(Config, Debug)]
@@ -30,7 +30,21 @@ impl SparseLinearConfig {
 
 impl SparseLinear {
     pub fn forward(&self, x: SparseTensor) -> SparseTensor {
-        let features = self.inner.forward(x.features());
+        let features = per_voxel_linear(&self.inner, &x);
         x.with_features(features)
+    }
+}
+
+/// `linear` applied to the features of every voxel of `x`, `[N, d_out]`: the same as
+/// `linear.forward(x.features())`, computed as a 1×1×1 sparse convolution (the op's GEMM and
+/// weight-gradient kernels are several times faster than the backends' matmul on these tall,
+/// thin products). Keeps Burn's `Linear` and its record.
+pub fn per_voxel_linear(linear: &Linear, x: &SparseTensor) -> Tensor<2> {
+    let [d_in, d_out] = linear.weight.dims();
+    let map = x.submanifold_map(1);
+    let out = sparse_conv(x.features(), linear.weight.val().reshape([1, d_in, d_out]), &map);
+    match &linear.bias {
+        Some(bias) => out + bias.val().unsqueeze_dim(0),
+        None => out,
     }
 }

@@ -11,7 +11,7 @@ pub use conv::{
     SparseConv3d, SparseConv3dConfig, SparseConvTranspose3d, SparseConvTranspose3dConfig, SubmanifoldConv3d,
     SubmanifoldConv3dConfig,
 };
-pub use linear::{SparseLinear, SparseLinearConfig};
+pub use linear::{SparseLinear, SparseLinearConfig, per_voxel_linear};
 pub use norm::{SparseBatchNorm, SparseBatchNormConfig};
 
 use crate::SparseTensor;
