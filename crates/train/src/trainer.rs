@@ -210,7 +210,7 @@ pub fn train_model<D: Detector>(mut model: D, cfg: &RunConfig, run: &RunDir, opt
         }
         // The epoch is done.
         let done = state.epoch + 1;
-        let due = (cfg.train.val_every > 0 && done % cfg.train.val_every == 0) || done == epochs || done == stop_epochs;
+        let due = (cfg.train.val_every > 0 && done.is_multiple_of(cfg.train.val_every)) || done == epochs || done == stop_epochs;
         let val = if due { Some(validate(&model.valid(), &val_loader, device, &cfg.eval.protocol(), opts.verbose)?) } else { None };
         let steps_in_epoch = state.batch.max(1) as f64;
         let mean = |k: &str| state.epoch_sums.iter().find(|(n, _)| n == k).map(|(_, s)| s / steps_in_epoch);

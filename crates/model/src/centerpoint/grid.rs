@@ -36,7 +36,7 @@ impl BevGrid {
             size[1]
         );
         assert!(!cfg.down_strides.is_empty() && cfg.up_strides[0] > 0, "at least one block with a positive up factor");
-        assert!(cfg.down_strides[0] % cfg.up_strides[0] == 0, "the first block's stride must be a multiple of its up factor");
+        assert!(cfg.down_strides[0].is_multiple_of(cfg.up_strides[0]), "the first block's stride must be a multiple of its up factor");
         BevGrid {
             min: [cfg.x_range[0], cfg.y_range[0], cfg.z_range[0]],
             voxel: cfg.voxel_size,

@@ -94,8 +94,8 @@ mod tests {
         // CenterNet on a 10×20 box at overlap 0.7: r1 = 13.898, r2 = 17.162, r3 = 2.7734 → 2.773...
         let r = gaussian_radius(10.0, 20.0, 0.7);
         let r3 = {
-            let (a, b, c) = (2.8, -2.0 * 0.7 * 30.0, -0.3 * 200.0);
-            (b + ((b * b) - 4.0 * a * c as f64).sqrt()) / 2.0
+            let (a, b, c): (f64, f64, f64) = (2.8, -2.0 * 0.7 * 30.0, -0.3 * 200.0);
+            (b + ((b * b) - 4.0 * a * c).sqrt()) / 2.0
         };
         assert!((r - r3).abs() < 1e-12, "{r} vs {r3}");
         // A person (0.9 × 0.5 m) on 0.2 m cells at overlap 0.1 is below the 2-cell minimum.
