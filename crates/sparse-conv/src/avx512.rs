@@ -100,21 +100,21 @@ pub fn weight_grad(x: &[f32], c_in: usize, grad_out: &[f32], c_out: usize, pairs
         // Blocks of pairs whose rows stay in L1 while every tile of the partial passes over them;
         // each tile's sums go on in pair order, so the blocking does not change the result.
         for (xs, gs) in xs.chunks(PAIR_BLOCK).zip(gs.chunks(PAIR_BLOCK)) {
-        for i0 in (0..c_in).step_by(MR) {
-            for j0 in (0..c_out).step_by(NR) {
-                let cols = NR.min(c_out - j0);
-                macro_rules! rows {
-                    ($($r:literal)*) => {
-                        match MR.min(c_in - i0) {
-                            // SAFETY: rows and columns stay inside x, grad_out and the partial.
-                            $($r => unsafe { pair_outer_products::<$r>(&xs, &gs, i0, j0, cols, partial.as_mut_ptr(), c_out) },)*
-                            _ => unreachable!(),
-                        }
-                    };
+            for i0 in (0..c_in).step_by(MR) {
+                for j0 in (0..c_out).step_by(NR) {
+                    let cols = NR.min(c_out - j0);
+                    macro_rules! rows {
+                        ($($r:literal)*) => {
+                            match MR.min(c_in - i0) {
+                                // SAFETY: rows and columns stay inside x, grad_out and the partial.
+                                $($r => unsafe { pair_outer_products::<$r>(&xs, &gs, i0, j0, cols, partial.as_mut_ptr(), c_out) },)*
+                                _ => unreachable!(),
+                            }
+                        };
+                    }
+                    rows!(1 2 3 4 5 6 7 8 9 10 11 12);
                 }
-                rows!(1 2 3 4 5 6 7 8 9 10 11 12);
             }
-        }
         }
     });
     grad.par_chunks_mut(block).enumerate().for_each(|(k, dst)| {
