@@ -5,7 +5,7 @@
 //! 128 KiB. A training step allocates and frees feature maps of megabytes hundreds of times, so
 //! every step faulted each of them in again, page by page, zeroed by the kernel: measured on
 //! the standard scene, a MinkUNet training step at batch 2 took 7.8 s with 42 % of the process's
-//! time in the kernel, and 5.1 s once freed memory stays in the heap. Peak RSS is unchanged (the
+//! time in the kernel, and 5.1–5.8 s once freed memory stays in the heap. Peak RSS is unchanged (the
 //! step's peak is the heap's peak either way).
 
 /// Largest block glibc lets `mallopt` keep in the heap (`DEFAULT_MMAP_THRESHOLD_MAX` on 64-bit).
