@@ -225,6 +225,14 @@ pub enum PairDirection {
     Backward,
 }
 
+/// `len` elements of scratch space, not initialised.
+fn scratch<T>(len: usize) -> Vec<std::mem::MaybeUninit<T>> {
+    let mut v = Vec::with_capacity(len);
+    // SAFETY: MaybeUninit needs no initialisation.
+    unsafe { v.set_len(len) };
+    v
+}
+
 struct SyncPtr<T>(*mut T);
 unsafe impl<T> Send for SyncPtr<T> {}
 unsafe impl<T> Sync for SyncPtr<T> {}
@@ -297,23 +305,31 @@ pub fn pair_conv<T: Element>(
         let out_ptr = &out_ptr;
         let chunks = (e - s).div_ceil(CHUNK_ROWS);
         (0..chunks).into_par_iter().for_each_init(
-            || (vec![T::ZERO; CHUNK_ROWS * c_src], vec![T::ZERO; CHUNK_ROWS * c_dst]),
+            // Scratch that is written before it is read: rayon may call this once per split, so
+            // zeroing it would be a pass over it each time for nothing.
+            || (scratch::<T>(CHUNK_ROWS * c_src), scratch::<T>(CHUNK_ROWS * c_dst)),
             |(gathered, product), chunk| {
                 let a = s + chunk * CHUNK_ROWS;
                 let b = (a + CHUNK_ROWS).min(e);
                 let m = b - a;
+                let (gathered, product) = (gathered.as_mut_ptr().cast::<T>(), product.as_mut_ptr().cast::<T>());
                 for (j, &r) in gather_side[a..b].iter().enumerate() {
-                    let r = r as usize;
-                    gathered[j * c_src..(j + 1) * c_src].copy_from_slice(&src[r * c_src..(r + 1) * c_src]);
+                    // SAFETY: row r of the source and row j < CHUNK_ROWS of the scratch.
+                    unsafe { std::ptr::copy_nonoverlapping(src.as_ptr().add(r as usize * c_src), gathered.add(j * c_src), c_src) };
                 }
+                // SAFETY: the m gathered rows were written above; with beta = 0 the product is
+                // written, not read.
                 unsafe {
-                    serial_gemm(m, c_src, c_dst, gathered.as_ptr(), c_src as isize, 1, w.as_ptr(), rsb, csb, T::ZERO, product.as_mut_ptr(), c_dst as isize, 1);
+                    serial_gemm(m, c_src, c_dst, gathered, c_src as isize, 1, w.as_ptr(), rsb, csb, T::ZERO, product, c_dst as isize, 1);
                 }
                 for (j, &r) in scatter_side[a..b].iter().enumerate() {
                     // SAFETY: within offset k each destination row appears once, so no two tasks
-                    // touch the same row; offsets run one after another.
-                    let dst = unsafe { std::slice::from_raw_parts_mut(out_ptr.0.add(r as usize * c_dst), c_dst) };
-                    for (d, &p) in dst.iter_mut().zip(&product[j * c_dst..(j + 1) * c_dst]) {
+                    // touch the same row; offsets run one after another. Product row j < m was
+                    // written by the GEMM.
+                    let (dst, product) = unsafe {
+                        (std::slice::from_raw_parts_mut(out_ptr.0.add(r as usize * c_dst), c_dst), std::slice::from_raw_parts(product.add(j * c_dst), c_dst))
+                    };
+                    for (d, &p) in dst.iter_mut().zip(product) {
                         *d += p;
                     }
                 }
