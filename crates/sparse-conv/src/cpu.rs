@@ -226,14 +226,15 @@ pub enum PairDirection {
 }
 
 /// `len` elements of scratch space, not initialised.
-fn scratch<T>(len: usize) -> Vec<std::mem::MaybeUninit<T>> {
+pub(crate) fn scratch<T>(len: usize) -> Vec<std::mem::MaybeUninit<T>> {
     let mut v = Vec::with_capacity(len);
     // SAFETY: MaybeUninit needs no initialisation.
     unsafe { v.set_len(len) };
     v
 }
 
-struct SyncPtr<T>(*mut T);
+/// A raw pointer tasks share, each writing its own disjoint part.
+pub(crate) struct SyncPtr<T>(pub(crate) *mut T);
 unsafe impl<T> Send for SyncPtr<T> {}
 unsafe impl<T> Sync for SyncPtr<T> {}
 
