@@ -4,12 +4,14 @@
 //! transposed copies of the activations (measured: a quarter of a MinkUNet training step).
 //!
 //! Conventions: `stats` is `[mean_0..mean_C, var_0..var_C]` with the biased variance (what the
-//! output is normalised with; PyTorch's and Burn's running statistics take it too). The layer is
+//! output is normalised with, and what Burn's running variance takes; PyTorch's running variance
+//! takes the unbiased one). The layer is
 //! `z = x·a + b` with `a = γ/√(var + ε)`, `b = β − mean·a`, then `y = max(z, 0)` when `relu`;
 //! ReLU's derivative at 0 is 0, and a NaN passes through (as Burn's `relu`), never hidden.
 //!
-//! Determinism: per-channel sums are taken in f64 over fixed chunks of rows and added in chunk
-//! order, so results are bit-identical at any thread count. The backward recomputes `z` with the
+//! Determinism: per-channel sums are taken over blocks of 16 rows in the element type, then in
+//! f64 over fixed chunks of rows added in chunk order, so results are bit-identical at any thread
+//! count. The backward recomputes `z` with the
 //! same `a`, `b` and arithmetic as the forward, so its ReLU mask is the forward's exactly.
 
 use std::mem::MaybeUninit;
