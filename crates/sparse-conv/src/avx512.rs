@@ -16,7 +16,7 @@ use std::sync::OnceLock;
 
 use rayon::prelude::*;
 
-use crate::cpu::{GRAD_CHUNK, SyncPtr, scratch};
+use crate::cpu::{SyncPtr, grad_chunks, scratch};
 use crate::kernel_map::OffsetPairs;
 
 /// Columns per tile: two 16-lane vectors.
@@ -100,20 +100,12 @@ pub fn weight_grad(x: &[f32], c_in: usize, grad_out: &[f32], c_out: usize, pairs
     // Each offset's pairs in fixed chunks. An offset's first chunk writes its block of the result
     // directly, each other chunk a partial of its own, added after in chunk order: the same sums
     // as zero plus every partial, without zeroing the result or copying into it.
-    let mut chunks = Vec::new();
-    let mut first_of = vec![None; volume];
-    for (k, first) in first_of.iter_mut().enumerate() {
-        let (s, e) = (pairs.start[k], pairs.start[k + 1]);
-        if s < e {
-            *first = Some(chunks.len());
-        }
-        chunks.extend((s..e).step_by(GRAD_CHUNK).map(|a| (k, a, (a + GRAD_CHUNK).min(e))));
-    }
+    let (chunks, first_chunk) = grad_chunks(pairs);
     // Partial slot of each chunk that is not its offset's first.
     let mut slots = vec![None; chunks.len()];
     let mut partials_len = 0;
     for (i, &(k, _, _)) in chunks.iter().enumerate() {
-        if first_of[k] != Some(i) {
+        if i != first_chunk[k] {
             slots[i] = Some(partials_len);
             partials_len += 1;
         }
@@ -155,15 +147,16 @@ pub fn weight_grad(x: &[f32], c_in: usize, grad_out: &[f32], c_out: usize, pairs
         }
     });
     grad.par_chunks_mut(block).enumerate().for_each(|(k, dst)| {
-        let Some(first) = first_of[k] else {
+        let offset_chunks = first_chunk[k]..first_chunk[k + 1];
+        if offset_chunks.is_empty() {
             dst.iter_mut().for_each(|v| {
                 v.write(0.0);
             });
             return;
-        };
+        }
         // SAFETY: the offset's first chunk wrote this block.
         let dst = unsafe { std::slice::from_raw_parts_mut(dst.as_mut_ptr().cast::<f32>(), block) };
-        for slot in chunks[first..].iter().zip(&slots[first..]).take_while(|(c, _)| c.0 == k).filter_map(|(_, s)| *s) {
+        for slot in slots[offset_chunks].iter().filter_map(|s| *s) {
             // SAFETY: the chunk of this slot wrote it.
             let partial = unsafe { std::slice::from_raw_parts(partials.as_ptr().cast::<f32>().add(slot * block), block) };
             for (d, &p) in dst.iter_mut().zip(partial) {
@@ -180,6 +173,7 @@ pub fn weight_grad(x: &[f32], c_in: usize, grad_out: &[f32], c_out: usize, pairs
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::cpu::GRAD_CHUNK;
 
     /// Against a naive f64 sum, on offsets of several chunks (the partials path), none (zeros)
     /// and a few pairs, with channel counts that leave partial row and column tiles; and the same

@@ -17,9 +17,9 @@ use burn::backend::tensor::{FloatTensor, IndexingUpdateOp, IntTensor};
 use burn::backend::ndarray::NdArrayTensor;
 use burn::backend::{Autodiff, Backend, Flex, NdArray, TensorMetadata, backend_extension};
 use burn_cubecl::CubeBackend;
-use burn::tensor::{DType, Shape, TensorData};
+use burn::tensor::{Shape, TensorData};
 
-use crate::cpu::{self, PairDirection};
+use crate::cpu::{self, Element, PairDirection};
 use crate::cube;
 use crate::kernel_map::KernelMap;
 use crate::timing::{Kernel, in_kernel};
@@ -170,54 +170,73 @@ impl HostFloats for NdArray {
     }
 }
 
-/// Runs `f32`/`f64` on the values of two CPU tensors of one dtype and wraps the result.
-fn on_cpu<B: HostFloats>(
-    inputs: [&FloatTensor<B>; 2],
-    out_shape: [usize; 2],
-    run_f32: impl FnOnce(&[f32], &[f32]) -> Vec<f32>,
-    run_f64: impl FnOnce(&[f64], &[f64]) -> Vec<f64>,
-) -> FloatTensor<B> {
-    let [a, b] = inputs;
-    let device = a.device();
-    assert_eq!(a.dtype(), b.dtype(), "sparse conv inputs must share a dtype, got {:?} and {:?}", a.dtype(), b.dtype());
-    let data = match a.dtype() {
-        DType::F32 => TensorData::new(run_f32(&B::host_f32(a), &B::host_f32(b)), out_shape),
-        DType::F64 => TensorData::new(run_f64(&B::host_f64(a), &B::host_f64(b)), out_shape),
-        other => panic!("sparse conv runs on f32 and f64 tensors, got {other:?}"),
-    };
-    B::float_from_data(data, &device)
+/// An element type of the CPU kernels, read from a CPU backend's tensor.
+pub(crate) trait Host: Element {
+    fn host<B: HostFloats>(t: &FloatTensor<B>) -> Cow<'_, [Self]>;
 }
+
+impl Host for f32 {
+    fn host<B: HostFloats>(t: &FloatTensor<B>) -> Cow<'_, [f32]> {
+        B::host_f32(t)
+    }
+}
+
+impl Host for f64 {
+    fn host<B: HostFloats>(t: &FloatTensor<B>) -> Cow<'_, [f64]> {
+        B::host_f64(t)
+    }
+}
+
+/// Evaluates `$body` with `$T` the element type (f32 or f64) the tensors share, and wraps the
+/// values it returns, of shape `$shape`, in a `$B` tensor on the first tensor's device.
+macro_rules! on_host {
+    ($B:ty, [$first:expr $(, $other:expr)* $(,)?], $shape:expr, |$T:ident| $body:expr) => {{
+        let dtype = $first.dtype();
+        $(assert_eq!($other.dtype(), dtype, "the op's tensors must share a dtype, got {:?} and {dtype:?}", $other.dtype());)*
+        let device = $first.device();
+        let data = match dtype {
+            burn::tensor::DType::F32 => {
+                type $T = f32;
+                burn::tensor::TensorData::new($body, $shape)
+            }
+            burn::tensor::DType::F64 => {
+                type $T = f64;
+                burn::tensor::TensorData::new($body, $shape)
+            }
+            other => panic!("the CPU kernels run on f32 and f64 tensors, got {other:?}"),
+        };
+        <$B as burn::backend::ops::FloatTensorOps<$B>>::float_from_data(data, &device)
+    }};
+}
+pub(crate) use on_host;
 
 fn cpu_forward<B: HostFloats>(features: FloatTensor<B>, weight: FloatTensor<B>, map: &KernelMap) -> FloatTensor<B> {
     let (c_in, c_out) = (weight.shape()[1], weight.shape()[2]);
     check_shapes(&features.shape(), &weight.shape(), map.n_in(), map.volume());
-    in_kernel(Kernel::ConvForward, || on_cpu::<B>(
-        [&features, &weight],
-        [map.n_out(), c_out],
-        |x, w| cpu::pair_conv(x, c_in, w, c_out, map.n_out(), PairDirection::Forward, map.pairs(), map.identity_offset()),
-        |x, w| cpu::pair_conv(x, c_in, w, c_out, map.n_out(), PairDirection::Forward, map.pairs(), map.identity_offset()),
-    ))
+    in_kernel(Kernel::ConvForward, || {
+        on_host!(B, [features, weight], [map.n_out(), c_out], |T| {
+            cpu::pair_conv(&T::host::<B>(&features), c_in, &T::host::<B>(&weight), c_out, map.n_out(), PairDirection::Forward, map.pairs(), map.identity_offset())
+        })
+    })
 }
 
 fn cpu_input_grad<B: HostFloats>(grad_out: FloatTensor<B>, weight: FloatTensor<B>, map: &KernelMap) -> FloatTensor<B> {
     let (c_in, c_out) = (weight.shape()[1], weight.shape()[2]);
-    in_kernel(Kernel::ConvInputGrad, || on_cpu::<B>(
-        [&grad_out, &weight],
-        [map.n_in(), c_in],
-        |g, w| cpu::pair_conv(g, c_out, w, c_in, map.n_in(), PairDirection::Backward, map.pairs(), map.identity_offset()),
-        |g, w| cpu::pair_conv(g, c_out, w, c_in, map.n_in(), PairDirection::Backward, map.pairs(), map.identity_offset()),
-    ))
+    in_kernel(Kernel::ConvInputGrad, || {
+        on_host!(B, [grad_out, weight], [map.n_in(), c_in], |T| {
+            cpu::pair_conv(&T::host::<B>(&grad_out), c_out, &T::host::<B>(&weight), c_in, map.n_in(), PairDirection::Backward, map.pairs(), map.identity_offset())
+        })
+    })
 }
 
 fn cpu_weight_grad<B: HostFloats>(features: FloatTensor<B>, grad_out: FloatTensor<B>, map: &KernelMap) -> FloatTensor<B> {
     let (c_in, c_out) = (features.shape()[1], grad_out.shape()[1]);
     let pairs = map.pairs();
-    let out = in_kernel(Kernel::ConvWeightGrad, || on_cpu::<B>(
-        [&features, &grad_out],
-        [map.volume(), c_in * c_out],
-        |x, g| cpu::weight_grad(x, c_in, g, c_out, pairs, map.identity_offset()),
-        |x, g| cpu::weight_grad(x, c_in, g, c_out, pairs, map.identity_offset()),
-    ));
+    let out = in_kernel(Kernel::ConvWeightGrad, || {
+        on_host!(B, [features, grad_out], [map.volume(), c_in * c_out], |T| {
+            cpu::weight_grad(&T::host::<B>(&features), c_in, &T::host::<B>(&grad_out), c_out, pairs, map.identity_offset())
+        })
+    });
     B::float_reshape(out, Shape::new([map.volume(), c_in, c_out]))
 }
 

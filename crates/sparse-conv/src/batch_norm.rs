@@ -11,7 +11,6 @@
 //! variance), the parameter gradients `[2, C]` (dγ; dβ).
 #![allow(deprecated)]
 
-use std::borrow::Cow;
 
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
 use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
@@ -19,11 +18,10 @@ use burn::backend::autodiff::grads::Gradients;
 use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
 use burn::backend::tensor::FloatTensor;
 use burn::backend::{Autodiff, Backend, Dispatch, Flex, NdArray, Scalar, TensorMetadata, backend_extension};
-use burn::tensor::{DType, Shape, Slice, Tensor, TensorData};
+use burn::tensor::{Shape, Slice, Tensor};
 use burn_cubecl::CubeBackend;
 
-use crate::backend::HostFloats;
-use crate::cpu::Element;
+use crate::backend::{Host, on_host};
 use crate::cpu_norm;
 use crate::timing::{Kernel, in_kernel};
 
@@ -190,42 +188,6 @@ pub mod composed {
     }
 }
 
-/// Slices of a CPU tensor in the element type `T`.
-trait Host: Element {
-    fn host<B: HostFloats>(t: &FloatTensor<B>) -> Cow<'_, [Self]>;
-}
-
-impl Host for f32 {
-    fn host<B: HostFloats>(t: &FloatTensor<B>) -> Cow<'_, [f32]> {
-        B::host_f32(t)
-    }
-}
-
-impl Host for f64 {
-    fn host<B: HostFloats>(t: &FloatTensor<B>) -> Cow<'_, [f64]> {
-        B::host_f64(t)
-    }
-}
-
-/// Runs `run::<f32>` or `run::<f64>` on the dtype of `x` and wraps its values in `shape`.
-macro_rules! on_host {
-    ($B:ty, $x:expr, $shape:expr, |$T:ident| $body:expr) => {{
-        let device = $x.device();
-        let data = match $x.dtype() {
-            DType::F32 => {
-                type $T = f32;
-                TensorData::new($body, $shape)
-            }
-            DType::F64 => {
-                type $T = f64;
-                TensorData::new($body, $shape)
-            }
-            other => panic!("batch norm runs on f32 and f64 tensors on the CPU, got {other:?}"),
-        };
-        <$B as burn::backend::ops::FloatTensorOps<$B>>::float_from_data(data, &device)
-    }};
-}
-
 fn check(x: &Shape, c: usize, what: &str) {
     assert_eq!(x.num_dims(), 2, "batch norm features must be [rows, channels], got {x:?}");
     assert_eq!(x[1], c, "batch norm {what}: features have {} channels, the layer {c}", x[1]);
@@ -238,7 +200,7 @@ macro_rules! cpu_backend {
                 let shape = x.shape();
                 assert_eq!(shape.num_dims(), 2, "batch norm features must be [rows, channels], got {shape:?}");
                 let c = shape[1];
-                in_kernel(Kernel::BatchNorm, || on_host!($backend, x, [2, c], |T| cpu_norm::channel_stats(&T::host::<Self>(&x), c)))
+                in_kernel(Kernel::BatchNorm, || on_host!($backend, [x], [2, c], |T| cpu_norm::channel_stats(&T::host::<Self>(&x), c)))
             }
             fn batch_norm_normalize(
                 x: FloatTensor<Self>,
@@ -251,7 +213,7 @@ macro_rules! cpu_backend {
             ) -> FloatTensor<Self> {
                 let shape = x.shape();
                 check(&shape, gamma.shape()[0], "forward");
-                in_kernel(Kernel::BatchNorm, || on_host!($backend, x, [shape[0], shape[1]], |T| cpu_norm::normalize(
+                in_kernel(Kernel::BatchNorm, || on_host!($backend, [x, stats, gamma, beta], [shape[0], shape[1]], |T| cpu_norm::normalize(
                     &T::host::<Self>(&x),
                     &T::host::<Self>(&stats),
                     &T::host::<Self>(&gamma),
@@ -271,7 +233,7 @@ macro_rules! cpu_backend {
             ) -> FloatTensor<Self> {
                 let c = gamma.shape()[0];
                 check(&x.shape(), c, "backward");
-                in_kernel(Kernel::BatchNorm, || on_host!($backend, x, [2, c], |T| cpu_norm::param_grads(
+                in_kernel(Kernel::BatchNorm, || on_host!($backend, [x, grad_out, stats, gamma, beta], [2, c], |T| cpu_norm::param_grads(
                     &T::host::<Self>(&x),
                     &T::host::<Self>(&grad_out),
                     &T::host::<Self>(&stats),
@@ -294,7 +256,7 @@ macro_rules! cpu_backend {
             ) -> FloatTensor<Self> {
                 let shape = x.shape();
                 check(&shape, gamma.shape()[0], "backward");
-                in_kernel(Kernel::BatchNorm, || on_host!($backend, x, [shape[0], shape[1]], |T| cpu_norm::input_grad(
+                in_kernel(Kernel::BatchNorm, || on_host!($backend, [x, grad_out, stats, gamma, beta, param_grads], [shape[0], shape[1]], |T| cpu_norm::input_grad(
                     &T::host::<Self>(&x),
                     &T::host::<Self>(&grad_out),
                     &T::host::<Self>(&stats),

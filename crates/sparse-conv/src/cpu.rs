@@ -142,6 +142,22 @@ pub unsafe fn serial_gemm<T: Element>(
     }
 }
 
+/// The weight gradient's pairs cut into chunks of at most [`GRAD_CHUNK`], `(offset, start, end)`,
+/// listed offset by offset; `first_chunk[k]..first_chunk[k + 1]` are offset k's. The cut depends
+/// only on the map, which keeps the partial sums, and the result, independent of the threads.
+pub(crate) fn grad_chunks(pairs: &OffsetPairs) -> (Vec<(usize, usize, usize)>, Vec<usize>) {
+    let volume = pairs.start.len() - 1;
+    let mut chunks = Vec::new();
+    let mut first_chunk = Vec::with_capacity(volume + 1);
+    for k in 0..volume {
+        first_chunk.push(chunks.len());
+        let (s, e) = (pairs.start[k], pairs.start[k + 1]);
+        chunks.extend((s..e).step_by(GRAD_CHUNK).map(|a| (k, a, (a + GRAD_CHUNK).min(e))));
+    }
+    first_chunk.push(chunks.len());
+    (chunks, first_chunk)
+}
+
 /// `dW_k = Σ_{(i, o) ∈ M_k} x[i]ᵀ · g[o]`, as `[K, C_in, C_out]`.
 ///
 /// Each offset's pairs are cut into fixed chunks whose partial products are summed in chunk order;
@@ -159,20 +175,7 @@ pub fn weight_grad<T: Element>(
     }
     let volume = pairs.start.len() - 1;
     let block = c_in * c_out;
-    // Chunks are listed offset by offset; `first_chunk[k]..first_chunk[k + 1]` are offset k's.
-    let mut chunks = Vec::new();
-    let mut first_chunk = Vec::with_capacity(volume + 1);
-    for k in 0..volume {
-        first_chunk.push(chunks.len());
-        let (s, e) = (pairs.start[k], pairs.start[k + 1]);
-        let mut a = s;
-        while a < e {
-            let b = (a + GRAD_CHUNK).min(e);
-            chunks.push((k, a, b));
-            a = b;
-        }
-    }
-    first_chunk.push(chunks.len());
+    let (chunks, first_chunk) = grad_chunks(pairs);
     let mut partials = vec![T::ZERO; chunks.len() * block];
     if block > 0 {
         partials.par_chunks_mut(block).zip(chunks.par_iter()).for_each_init(
