@@ -52,6 +52,30 @@ pub trait BatchNormBackend: Backend {
         composed::normalize::<Self>(x, stats, gamma, beta, epsilon, relu)
     }
 
+    /// `relu((x − mean)·γ/√(var + ε) + β + residual)`: a residual block's last batch norm, its
+    /// shortcut's sum and the ReLU in one pass, where composed they are three.
+    #[allow(clippy::too_many_arguments)]
+    #[fusion(dtype = x, shape = x)]
+    fn batch_norm_add_relu(
+        x: FloatTensor<Self>,
+        stats: FloatTensor<Self>,
+        gamma: FloatTensor<Self>,
+        beta: FloatTensor<Self>,
+        residual: FloatTensor<Self>,
+        epsilon: f64,
+        batch_stats: bool,
+    ) -> FloatTensor<Self> {
+        let _ = batch_stats;
+        Self::relu(Self::float_add(composed::normalize::<Self>(x, stats, gamma, beta, epsilon, false), residual))
+    }
+
+    /// ReLU's backward from its output `y` (`grad_out` where `y > 0`, else 0): the first step
+    /// of [`Self::batch_norm_add_relu`]'s backward, and the residual's gradient.
+    #[fusion(dtype = grad_out, shape = grad_out)]
+    fn batch_norm_relu_grad(y: FloatTensor<Self>, grad_out: FloatTensor<Self>) -> FloatTensor<Self> {
+        Self::relu_backward(y, grad_out)
+    }
+
     /// `[dγ; dβ]` for the output gradient `grad_out`.
     #[fusion(dtype = x, shape = Shape::new([2, x[1]]))]
     fn batch_norm_param_grads(
@@ -222,6 +246,32 @@ macro_rules! cpu_backend {
                     relu
                 )))
             }
+            fn batch_norm_add_relu(
+                x: FloatTensor<Self>,
+                stats: FloatTensor<Self>,
+                gamma: FloatTensor<Self>,
+                beta: FloatTensor<Self>,
+                residual: FloatTensor<Self>,
+                epsilon: f64,
+                _batch_stats: bool,
+            ) -> FloatTensor<Self> {
+                let shape = x.shape();
+                check(&shape, gamma.shape()[0], "forward");
+                assert_eq!(residual.shape(), shape, "batch norm residual must match the features");
+                in_kernel(Kernel::BatchNorm, || on_host!($backend, [x, stats, gamma, beta, residual], [shape[0], shape[1]], |T| cpu_norm::normalize_add_relu(
+                    &T::host::<Self>(&x),
+                    &T::host::<Self>(&stats),
+                    &T::host::<Self>(&gamma),
+                    &T::host::<Self>(&beta),
+                    &T::host::<Self>(&residual),
+                    epsilon
+                )))
+            }
+            fn batch_norm_relu_grad(y: FloatTensor<Self>, grad_out: FloatTensor<Self>) -> FloatTensor<Self> {
+                let shape = y.shape();
+                assert_eq!(grad_out.shape(), shape, "ReLU output and its gradient differ in shape");
+                in_kernel(Kernel::BatchNorm, || on_host!($backend, [y, grad_out], shape.clone(), |T| cpu_norm::relu_grad(&T::host::<Self>(&y), &T::host::<Self>(&grad_out))))
+            }
             fn batch_norm_param_grads(
                 x: FloatTensor<Self>,
                 grad_out: FloatTensor<Self>,
@@ -307,6 +357,38 @@ impl<B: BatchNormBackend> Backward<B, 3> for BatchNormBackward {
     }
 }
 
+#[derive(Debug)]
+struct BatchNormAddReluBackward;
+
+impl<B: BatchNormBackend> Backward<B, 4> for BatchNormAddReluBackward {
+    /// `x, stats, gamma, beta, y (the output), epsilon, batch_stats`.
+    type State = (FloatTensor<B>, FloatTensor<B>, FloatTensor<B>, FloatTensor<B>, FloatTensor<B>, f64, bool);
+
+    /// Through the ReLU's mask first; what passes is the residual's gradient and the batch
+    /// norm's output gradient.
+    fn backward(self, ops: Ops<Self::State, 4>, grads: &mut Gradients, _checkpointer: &mut Checkpointer) {
+        let [node_x, node_gamma, node_beta, node_residual] = ops.parents;
+        let grad = grads.consume::<B>(&ops.node);
+        let (x, stats, gamma, beta, y, epsilon, batch_stats) = ops.state;
+        let dz = B::batch_norm_relu_grad(y, grad);
+        let c = gamma.shape()[0];
+        let params = B::batch_norm_param_grads(x.clone(), dz.clone(), stats.clone(), gamma.clone(), beta.clone(), epsilon, false);
+        let param_row = |i: usize| B::float_reshape(B::float_slice(params.clone(), &[Slice::from(i..i + 1), Slice::from(0..c)]), Shape::new([c]));
+        if let Some(node) = node_gamma {
+            grads.register::<B>(node.id, param_row(0));
+        }
+        if let Some(node) = node_beta {
+            grads.register::<B>(node.id, param_row(1));
+        }
+        if let Some(node) = node_x {
+            grads.register::<B>(node.id, B::batch_norm_input_grad(x, dz.clone(), stats, gamma, beta, params, epsilon, false, batch_stats));
+        }
+        if let Some(node) = node_residual {
+            grads.register::<B>(node.id, dz);
+        }
+    }
+}
+
 /// Statistics are constants on `Autodiff` (the normalisation's backward accounts for them);
 /// the gradient methods keep their composed, differentiable bodies.
 impl<B: BatchNormBackend, C: CheckpointStrategy> BatchNormBackend for Autodiff<B, C> {
@@ -342,36 +424,73 @@ impl<B: BatchNormBackend, C: CheckpointStrategy> BatchNormBackend for Autodiff<B
             )),
         }
     }
+
+    fn batch_norm_add_relu(
+        x: FloatTensor<Self>,
+        stats: FloatTensor<Self>,
+        gamma: FloatTensor<Self>,
+        beta: FloatTensor<Self>,
+        residual: FloatTensor<Self>,
+        epsilon: f64,
+        batch_stats: bool,
+    ) -> FloatTensor<Self> {
+        let stats = stats.primitive().clone();
+        match BatchNormAddReluBackward.prepare::<C>([x.node(), gamma.node(), beta.node(), residual.node()]).compute_bound().stateful() {
+            OpsKind::Tracked(prep) => {
+                let (x, gamma, beta) = (x.primitive().clone(), gamma.primitive().clone(), beta.primitive().clone());
+                let y = B::batch_norm_add_relu(x.clone(), stats.clone(), gamma.clone(), beta.clone(), residual.into_primitive(), epsilon, batch_stats);
+                prep.finish((x, stats, gamma, beta, y.clone(), epsilon, batch_stats), y)
+            }
+            OpsKind::UnTracked(prep) => prep.finish(B::batch_norm_add_relu(
+                x.into_primitive(),
+                stats,
+                gamma.into_primitive(),
+                beta.into_primitive(),
+                residual.into_primitive(),
+                epsilon,
+                batch_stats,
+            )),
+        }
+    }
 }
 
-/// Batch norm of `[rows, C]` features with their own batch statistics (training), then ReLU when
-/// `relu`. Returns the output and the statistics `[2, C]` (mean; biased variance), constants, for
-/// the running averages.
-pub fn batch_norm_train(x: Tensor<2>, gamma: Tensor<1>, beta: Tensor<1>, epsilon: f64, relu: bool) -> (Tensor<2>, Tensor<2>) {
+/// What the op applies to the normalised features before returning them.
+#[derive(Clone, Debug)]
+pub enum Epilogue {
+    /// Nothing: plain batch norm.
+    Identity,
+    /// `max(·, 0)`.
+    Relu,
+    /// `max(· + residual, 0)`, the end of a residual block; the residual is `[rows, C]`.
+    AddRelu(Tensor<2>),
+}
+
+/// Batch norm of `[rows, C]` features with `stats` (`[2, C]`: mean; biased variance), then the
+/// epilogue. `batch_stats` says the statistics are `x`'s own.
+fn normalize(x: Tensor<2>, stats: Tensor<2>, gamma: Tensor<1>, beta: Tensor<1>, epsilon: f64, epilogue: Epilogue, batch_stats: bool) -> Tensor<2> {
+    let (x, stats, gamma, beta) = (x.into_dispatch(), stats.into_dispatch(), gamma.into_dispatch(), beta.into_dispatch());
+    Tensor::from_dispatch(match epilogue {
+        Epilogue::Identity | Epilogue::Relu => {
+            let relu = matches!(epilogue, Epilogue::Relu);
+            <Dispatch as BatchNormBackend>::batch_norm_normalize(x, stats, gamma, beta, epsilon, relu, batch_stats)
+        }
+        Epilogue::AddRelu(residual) => {
+            <Dispatch as BatchNormBackend>::batch_norm_add_relu(x, stats, gamma, beta, residual.into_dispatch(), epsilon, batch_stats)
+        }
+    })
+}
+
+/// Batch norm of `[rows, C]` features with their own batch statistics (training), then the
+/// epilogue. Returns the output and the statistics `[2, C]` (mean; biased variance), constants,
+/// for the running averages.
+pub fn batch_norm_train(x: Tensor<2>, gamma: Tensor<1>, beta: Tensor<1>, epsilon: f64, epilogue: Epilogue) -> (Tensor<2>, Tensor<2>) {
     let stats = Tensor::from_dispatch(<Dispatch as BatchNormBackend>::batch_norm_stats(x.clone().into_dispatch()));
-    let out = <Dispatch as BatchNormBackend>::batch_norm_normalize(
-        x.into_dispatch(),
-        stats.clone().into_dispatch(),
-        gamma.into_dispatch(),
-        beta.into_dispatch(),
-        epsilon,
-        relu,
-        true,
-    );
-    (Tensor::from_dispatch(out), stats)
+    (normalize(x, stats.clone(), gamma, beta, epsilon, epilogue, true), stats)
 }
 
 /// Batch norm of `[rows, C]` features with given statistics (inference: the running averages),
-/// then ReLU when `relu`. Differentiable in `x`, `gamma` and `beta`.
-pub fn batch_norm_eval(x: Tensor<2>, mean: Tensor<1>, var: Tensor<1>, gamma: Tensor<1>, beta: Tensor<1>, epsilon: f64, relu: bool) -> Tensor<2> {
+/// then the epilogue. Differentiable in `x`, `gamma`, `beta` and the residual.
+pub fn batch_norm_eval(x: Tensor<2>, mean: Tensor<1>, var: Tensor<1>, gamma: Tensor<1>, beta: Tensor<1>, epsilon: f64, epilogue: Epilogue) -> Tensor<2> {
     let stats = Tensor::stack::<2>(vec![mean, var], 0);
-    Tensor::from_dispatch(<Dispatch as BatchNormBackend>::batch_norm_normalize(
-        x.into_dispatch(),
-        stats.into_dispatch(),
-        gamma.into_dispatch(),
-        beta.into_dispatch(),
-        epsilon,
-        relu,
-        false,
-    ))
+    normalize(x, stats, gamma, beta, epsilon, epilogue, false)
 }

@@ -114,6 +114,43 @@ pub fn normalize<T: Element>(x: &[T], stats: &[T], gamma: &[T], beta: &[T], epsi
     })
 }
 
+/// `y = max(x·a + b + residual, 0)`: the end of a residual block (its last batch norm, the
+/// shortcut's sum and the ReLU) in one pass.
+pub fn normalize_add_relu<T: Element>(x: &[T], stats: &[T], gamma: &[T], beta: &[T], residual: &[T], epsilon: f64) -> Vec<T> {
+    let c = gamma.len();
+    assert_eq!(x.len(), residual.len(), "batch norm input and residual differ in size");
+    let (a, b, _) = affine(stats, gamma, beta, epsilon);
+    map_rows(x.len(), c, |chunk, out| {
+        let start = chunk * CHUNK_ROWS * c;
+        let rows = x[start..][..out.len()].chunks_exact(c);
+        let skips = residual[start..][..out.len()].chunks_exact(c);
+        for ((row, skip), dst) in rows.zip(skips).zip(out.chunks_exact_mut(c)) {
+            let (skip, a, b, dst) = (&skip[..c], &a[..c], &b[..c], &mut dst[..c]);
+            for j in 0..c {
+                let y = row[j] * a[j] + b[j] + skip[j];
+                dst[j].write(if y <= T::ZERO { T::ZERO } else { y });
+            }
+        }
+    })
+}
+
+/// ReLU's backward from its output: `dy` where `y > 0`, else 0 (a NaN output passes `dy`, as
+/// Burn's `relu_backward`).
+pub fn relu_grad<T: Element>(y: &[T], grad_out: &[T]) -> Vec<T> {
+    assert_eq!(y.len(), grad_out.len(), "ReLU output and its gradient differ in size");
+    const ELEMS: usize = 1 << 16;
+    let mut out = Vec::<T>::with_capacity(y.len());
+    out.spare_capacity_mut().par_chunks_mut(ELEMS).zip(y.par_chunks(ELEMS).zip(grad_out.par_chunks(ELEMS))).for_each(|(dst, (y, g))| {
+        let (y, g) = (&y[..dst.len()], &g[..dst.len()]);
+        for j in 0..dst.len() {
+            dst[j].write(if y[j] <= T::ZERO { T::ZERO } else { g[j] });
+        }
+    });
+    // SAFETY: the chunks cover every element and each is written.
+    unsafe { out.set_len(y.len()) };
+    out
+}
+
 /// `[Σ dz·x̂ ; Σ dz]` per channel, i.e. `[dγ ; dβ]`, where `dz` is `dy` through the ReLU's mask
 /// and `x̂ = (x − mean)/√(var + ε)`.
 #[allow(clippy::too_many_arguments)]

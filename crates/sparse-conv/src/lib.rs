@@ -32,7 +32,7 @@ pub mod tensor;
 pub mod timing;
 
 pub use backend::SparseConvBackend;
-pub use batch_norm::{BatchNormBackend, batch_norm_eval, batch_norm_train};
+pub use batch_norm::{BatchNormBackend, Epilogue, batch_norm_eval, batch_norm_train};
 pub use coords::{Coord, CoordError, CoordIndex};
 pub use kernel_map::{KernelMap, MapKind, NeighborTable};
 pub use op::sparse_conv;

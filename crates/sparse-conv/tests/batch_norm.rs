@@ -1,6 +1,7 @@
-//! The fused batch norm (+ ReLU) against Burn's own `BatchNorm` followed by Burn's `relu`, which
-//! Burn differentiates on its own: outputs, running statistics and the gradients to the features,
-//! γ and β, in training and in inference, on every backend; and central finite differences.
+//! The fused batch norm (+ ReLU, + a residual's sum and ReLU) against Burn's own `BatchNorm`
+//! followed by Burn's add and `relu`, which Burn differentiates on its own: outputs, running
+//! statistics and the gradients to the features, γ, β and the residual, in training and in
+//! inference, on every backend; and central finite differences.
 
 mod common;
 
@@ -10,7 +11,7 @@ use sparse_conv::burn::nn::BatchNormConfig;
 use sparse_conv::burn::tensor::activation::relu;
 use sparse_conv::burn::tensor::{DType, Device, Tensor, TensorData};
 use sparse_conv::modules::SparseBatchNormConfig;
-use sparse_conv::{SparseTensor, batch_norm_train};
+use sparse_conv::{Epilogue, SparseTensor, batch_norm_train};
 
 const ROWS: usize = 2600;
 const C: usize = 5;
@@ -40,38 +41,66 @@ fn sparse(x: Tensor<2>) -> SparseTensor {
     SparseTensor::new(x, coords).unwrap()
 }
 
+/// What follows the batch norm in a test.
+#[derive(Clone, Copy, Debug)]
+enum After {
+    Nothing,
+    Relu,
+    /// `relu(· + r)` with a random residual `r`.
+    AddRelu,
+}
+
+const AFTER: [After; 3] = [After::Nothing, After::Relu, After::AddRelu];
+
+/// Our layer's forward (`fused`) or Burn's `BatchNorm` and Burn's add and `relu`.
+fn apply(layer: &sparse_conv::modules::SparseBatchNorm, x: Tensor<2>, residual: Tensor<2>, after: After, fused: bool) -> Tensor<2> {
+    if fused {
+        let s = sparse(x);
+        match after {
+            After::Nothing => layer.forward(s),
+            After::Relu => layer.forward_relu(s),
+            After::AddRelu => layer.forward_add_relu(s, residual),
+        }
+        .into_features()
+    } else {
+        let y = layer.inner.forward(x);
+        match after {
+            After::Nothing => y,
+            After::Relu => relu(y),
+            After::AddRelu => relu(y + residual),
+        }
+    }
+}
+
 struct Outcome {
     y: Vec<f64>,
     dx: Vec<f64>,
     dgamma: Vec<f64>,
     dbeta: Vec<f64>,
+    dresidual: Vec<f64>,
     running: [Vec<f64>; 2],
 }
 
 /// One training step's forward and backward through our layer (`fused`) or Burn's.
-fn train_step(device: &Device, dtype: DType, relu_after: bool, fused: bool) -> Outcome {
+fn train_step(device: &Device, dtype: DType, after: After, fused: bool) -> Outcome {
     let ad = device.clone().autodiff();
     let (gamma, beta) = params(2);
     let x = tensor2(&features(1), [ROWS, C], &ad, dtype).require_grad();
     let g = tensor2(&random_values(&mut rng(3), ROWS * C), [ROWS, C], &ad, dtype);
+    let residual = tensor2(&random_values(&mut rng(8), ROWS * C), [ROWS, C], &ad, dtype).require_grad();
     let mut layer = SparseBatchNormConfig::new(C).init(&ad);
     layer.inner.gamma = layer.inner.gamma.map(|_| vec1(&gamma, &ad, dtype).require_grad());
     layer.inner.beta = layer.inner.beta.map(|_| vec1(&beta, &ad, dtype).require_grad());
     layer.inner.running_mean = RunningState::new(vec1(&[0.0; C], &ad, dtype));
     layer.inner.running_var = RunningState::new(vec1(&[1.0; C], &ad, dtype));
-    let y = if fused {
-        let s = sparse(x.clone());
-        if relu_after { layer.forward_relu(s) } else { layer.forward(s) }.into_features()
-    } else {
-        let y = layer.inner.forward(x.clone());
-        if relu_after { relu(y) } else { y }
-    };
+    let y = apply(&layer, x.clone(), residual.clone(), after, fused);
     let grads = loss(y.clone(), g).backward();
     Outcome {
         y: values(y),
         dx: values(x.grad(&grads).unwrap()),
         dgamma: values(layer.inner.gamma.grad(&grads).unwrap()),
         dbeta: values(layer.inner.beta.grad(&grads).unwrap()),
+        dresidual: residual.grad(&grads).map(values).unwrap_or_default(),
         running: [values(layer.inner.running_mean.value_sync()), values(layer.inner.running_var.value_sync())],
     }
 }
@@ -79,11 +108,13 @@ fn train_step(device: &Device, dtype: DType, relu_after: bool, fused: bool) -> O
 #[test]
 fn training_matches_burns_batch_norm_and_relu() {
     for t in targets() {
-        for relu_after in [false, true] {
-            let ours = train_step(&t.device, t.dtype, relu_after, true);
+        for after in AFTER {
+            let ours = train_step(&t.device, t.dtype, after, true);
             // The reference in f64 on the CPU, whatever the target.
-            let reference = train_step(&Device::flex(), DType::F64, relu_after, false);
-            let what = |w: &str| format!("{} relu={relu_after}: {w}", t.name);
+            let reference = train_step(&Device::flex(), DType::F64, after, false);
+            let what = |w: &str| format!("{} {after:?}: {w}", t.name);
+            assert_eq!(ours.dresidual.len(), reference.dresidual.len(), "{}", what("residual gradient present"));
+            assert_close(&ours.dresidual, &reference.dresidual, t.tol * 10.0, &what("residual gradient"));
             assert_close(&ours.y, &reference.y, t.tol, &what("output"));
             assert_close(&ours.dx, &reference.dx, t.tol * 10.0, &what("feature gradient"));
             assert_close(&ours.dgamma, &reference.dgamma, t.tol * 10.0, &what("gamma gradient"));
@@ -108,42 +139,57 @@ fn inference_uses_the_running_statistics() {
             bn.running_var = RunningState::new(vec1(&[1.0, 4.0, 9.0, 0.25, 2.0], &t.device, t.dtype));
         }
         let x = tensor2(&features(5), [ROWS, C], &t.device, t.dtype);
-        let expected = values(relu(burns.forward(x.clone())));
-        let actual = values(ours.forward_relu(sparse(x)).into_features());
-        assert_close(&actual, &expected, t.tol, &format!("{}: inference", t.name));
+        let residual = tensor2(&random_values(&mut rng(9), ROWS * C), [ROWS, C], &t.device, t.dtype);
+        let reference = sparse_conv::modules::SparseBatchNorm { inner: burns };
+        for after in AFTER {
+            let expected = values(apply(&reference, x.clone(), residual.clone(), after, false));
+            let actual = values(apply(&ours, x.clone(), residual.clone(), after, true));
+            assert_close(&actual, &expected, t.tol, &format!("{} {after:?}: inference", t.name));
+        }
     }
 }
 
-/// The gradients of the fused op equal central differences of its loss (f64), with the ReLU
-/// (away from its kink: the points are random).
+/// The gradients of the fused op equal central differences of its loss (f64), with the ReLU and
+/// with the residual's sum and ReLU (away from the kink: the points are random).
 #[test]
 fn gradients_match_finite_differences() {
     let device = Device::flex();
     let (rows, c) = (40, 3);
     let x0 = random_values(&mut rng(6), rows * c);
     let g0 = random_values(&mut rng(7), rows * c);
+    let r0 = random_values(&mut rng(10), rows * c);
     let (gamma0, beta0) = (vec![1.3, 0.7, -0.4], vec![0.1, -0.2, 0.3]);
-    let loss_of = |x: &[f64], gamma: &[f64], beta: &[f64]| {
-        let (y, _) = batch_norm_train(tensor2(x, [rows, c], &device, DType::F64), vec1(gamma, &device, DType::F64), vec1(beta, &device, DType::F64), 1e-5, true);
-        values(loss(y, tensor2(&g0, [rows, c], &device, DType::F64)))[0]
-    };
-    let ad = device.clone().autodiff();
-    let x = tensor2(&x0, [rows, c], &ad, DType::F64).require_grad();
-    let gamma = vec1(&gamma0, &ad, DType::F64).require_grad();
-    let beta = vec1(&beta0, &ad, DType::F64).require_grad();
-    let (y, _) = batch_norm_train(x.clone(), gamma.clone(), beta.clone(), 1e-5, true);
-    let grads = loss(y, tensor2(&g0, [rows, c], &ad, DType::F64)).backward();
-    let analytic = [values(x.grad(&grads).unwrap()), values(gamma.grad(&grads).unwrap()), values(beta.grad(&grads).unwrap())];
-    let eps = 1e-6;
-    for (which, grad) in analytic.iter().enumerate() {
-        for i in 0..grad.len() {
-            let mut args = [x0.clone(), gamma0.clone(), beta0.clone()];
-            args[which][i] += eps;
-            let plus = loss_of(&args[0], &args[1], &args[2]);
-            args[which][i] -= 2.0 * eps;
-            let minus = loss_of(&args[0], &args[1], &args[2]);
-            let numeric = (plus - minus) / (2.0 * eps);
-            assert!((grad[i] - numeric).abs() < 1e-5 * (1.0 + numeric.abs()), "argument {which}, element {i}: {} vs {numeric}", grad[i]);
+    for with_residual in [false, true] {
+        // args: x, γ, β, residual.
+        let forward = |d: &Device, args: [Tensor<2>; 2], gamma: Tensor<1>, beta: Tensor<1>| {
+            let [x, r] = args;
+            let epilogue = if with_residual { Epilogue::AddRelu(r) } else { Epilogue::Relu };
+            let (y, _) = batch_norm_train(x, gamma, beta, 1e-5, epilogue);
+            loss(y, tensor2(&g0, [rows, c], d, DType::F64))
+        };
+        let loss_of = |args: &[Vec<f64>; 4]| {
+            let t = |v: &[f64]| tensor2(v, [rows, c], &device, DType::F64);
+            values(forward(&device, [t(&args[0]), t(&args[3])], vec1(&args[1], &device, DType::F64), vec1(&args[2], &device, DType::F64)))[0]
+        };
+        let ad = device.clone().autodiff();
+        let x = tensor2(&x0, [rows, c], &ad, DType::F64).require_grad();
+        let r = tensor2(&r0, [rows, c], &ad, DType::F64).require_grad();
+        let gamma = vec1(&gamma0, &ad, DType::F64).require_grad();
+        let beta = vec1(&beta0, &ad, DType::F64).require_grad();
+        let grads = forward(&ad, [x.clone(), r.clone()], gamma.clone(), beta.clone()).backward();
+        let analytic = [values(x.grad(&grads).unwrap()), values(gamma.grad(&grads).unwrap()), values(beta.grad(&grads).unwrap()), r.grad(&grads).map(values).unwrap_or_default()];
+        assert_eq!(analytic[3].is_empty(), !with_residual, "a residual gradient exactly when there is a residual");
+        let eps = 1e-6;
+        for (which, grad) in analytic.iter().enumerate() {
+            for i in 0..grad.len() {
+                let mut args = [x0.clone(), gamma0.clone(), beta0.clone(), r0.clone()];
+                args[which][i] += eps;
+                let plus = loss_of(&args);
+                args[which][i] -= 2.0 * eps;
+                let minus = loss_of(&args);
+                let numeric = (plus - minus) / (2.0 * eps);
+                assert!((grad[i] - numeric).abs() < 1e-5 * (1.0 + numeric.abs()), "residual {with_residual}, argument {which}, element {i}: {} vs {numeric}", grad[i]);
+            }
         }
     }
 }

@@ -6,7 +6,7 @@ use burn::tensor::Device;
 
 use super::{
     SparseBatchNorm, SparseBatchNormConfig, SparseConv3d, SparseConv3dConfig, SparseConvTranspose3d,
-    SparseConvTranspose3dConfig, SubmanifoldConv3d, SubmanifoldConv3dConfig, relu,
+    SparseConvTranspose3dConfig, SubmanifoldConv3d, SubmanifoldConv3dConfig,
 };
 use crate::SparseTensor;
 
@@ -116,11 +116,10 @@ impl ResidualBlockConfig {
 impl ResidualBlock {
     pub fn forward(&self, x: SparseTensor) -> SparseTensor {
         let main = self.norm1.forward_relu(self.conv1.forward(x.clone()));
-        let main = self.norm2.forward(self.conv2.forward(main));
         let skip = match &self.shortcut {
             Some(shortcut) => shortcut.norm.forward(shortcut.conv.forward(x)),
             None => x,
         };
-        relu(main.with_features(main.features() + skip.into_features()))
+        self.norm2.forward_add_relu(self.conv2.forward(main), skip.into_features())
     }
 }

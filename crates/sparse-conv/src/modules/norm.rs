@@ -6,7 +6,7 @@ use burn::nn::{BatchNorm, BatchNormConfig};
 use burn::tensor::{Device, Tensor};
 
 use crate::SparseTensor;
-use crate::batch_norm::{batch_norm_eval, batch_norm_train};
+use crate::batch_norm::{Epilogue, batch_norm_eval, batch_norm_train};
 
 /// Configuration of a [`SparseBatchNorm`]; the defaults are PyTorch's `BatchNorm1d` (spec §1.6).
 #[derive(Config, Debug)]
@@ -21,7 +21,8 @@ pub struct SparseBatchNormConfig {
 /// Batch norm with every voxel of the batch as one sample: batch statistics and running-stat
 /// updates on an autodiff device with the layer's training flag on, running statistics
 /// otherwise (Burn's `BatchNorm` switch, whose parameters and record it keeps). It runs as the
-/// fused op of [`crate::batch_norm`], with the ReLU after it folded in by [`Self::forward_relu`].
+/// fused op of [`crate::batch_norm`], with the ReLU after it folded in by [`Self::forward_relu`]
+/// and a residual block's shortcut sum and ReLU by [`Self::forward_add_relu`].
 #[derive(Module, Debug)]
 pub struct SparseBatchNorm {
     pub inner: BatchNorm,
@@ -37,17 +38,23 @@ impl SparseBatchNormConfig {
 
 impl SparseBatchNorm {
     pub fn forward(&self, x: SparseTensor) -> SparseTensor {
-        let features = self.features(x.features(), false);
+        let features = self.features(x.features(), Epilogue::Identity);
         x.with_features(features)
     }
 
     /// `relu(self.forward(x))` in one op.
     pub fn forward_relu(&self, x: SparseTensor) -> SparseTensor {
-        let features = self.features(x.features(), true);
+        let features = self.features(x.features(), Epilogue::Relu);
         x.with_features(features)
     }
 
-    fn features(&self, x: Tensor<2>, relu: bool) -> Tensor<2> {
+    /// `relu(self.forward(x) + residual)` in one op; `residual` holds features of `x`'s voxels.
+    pub fn forward_add_relu(&self, x: SparseTensor, residual: Tensor<2>) -> SparseTensor {
+        let features = self.features(x.features(), Epilogue::AddRelu(residual));
+        x.with_features(features)
+    }
+
+    fn features(&self, x: Tensor<2>, epilogue: Epilogue) -> Tensor<2> {
         let bn = &self.inner;
         let [rows, channels] = x.dims();
         assert_eq!(channels, bn.gamma.dims()[0], "batch norm of {} channels got features of {channels}", bn.gamma.dims()[0]);
@@ -55,9 +62,9 @@ impl SparseBatchNorm {
         if !(device.is_autodiff() && bn.training.is_enabled()) {
             let mean = bn.running_mean.value().to_device(&device);
             let var = bn.running_var.value().to_device(&device);
-            return batch_norm_eval(x, mean, var, bn.gamma.val(), bn.beta.val(), bn.epsilon, relu);
+            return batch_norm_eval(x, mean, var, bn.gamma.val(), bn.beta.val(), bn.epsilon, epilogue);
         }
-        let (out, stats) = batch_norm_train(x, bn.gamma.val(), bn.beta.val(), bn.epsilon, relu);
+        let (out, stats) = batch_norm_train(x, bn.gamma.val(), bn.beta.val(), bn.epsilon, epilogue);
         // An empty batch has no statistics; the running averages keep their values.
         if rows > 0 {
             let stat = |i: usize| stats.clone().slice([i..i + 1, 0..channels]).reshape([channels]).detach();
