@@ -455,6 +455,8 @@ impl<B: BatchNormBackend, C: CheckpointStrategy> BatchNormBackend for Autodiff<B
 }
 
 /// What the op applies to the normalised features before returning them.
+// Built once per call and moved in: boxing the tensor would buy nothing.
+#[allow(clippy::large_enum_variant)]
 #[derive(Clone, Debug)]
 pub enum Epilogue {
     /// Nothing: plain batch norm.
