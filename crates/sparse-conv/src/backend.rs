@@ -22,7 +22,7 @@ use burn::tensor::{Shape, TensorData};
 use crate::cpu::{self, Element, PairDirection};
 use crate::cube;
 use crate::kernel_map::KernelMap;
-use crate::timing::{Kernel, in_kernel};
+use crate::timing::{Kernel, count_conv_flops, in_kernel};
 
 /// A backend that can run the sparse convolution of a [`KernelMap`].
 ///
@@ -213,6 +213,7 @@ pub(crate) use on_host;
 fn cpu_forward<B: HostFloats>(features: FloatTensor<B>, weight: FloatTensor<B>, map: &KernelMap) -> FloatTensor<B> {
     let (c_in, c_out) = (weight.shape()[1], weight.shape()[2]);
     check_shapes(&features.shape(), &weight.shape(), map.n_in(), map.volume());
+    count_conv_flops(map.pairs().input.len(), c_in, c_out);
     in_kernel(Kernel::ConvForward, || {
         on_host!(B, [features, weight], [map.n_out(), c_out], |T| {
             cpu::pair_conv(&T::host::<B>(&features), c_in, &T::host::<B>(&weight), c_out, map.n_out(), PairDirection::Forward, map.pairs(), map.identity_offset())
@@ -222,6 +223,7 @@ fn cpu_forward<B: HostFloats>(features: FloatTensor<B>, weight: FloatTensor<B>, 
 
 fn cpu_input_grad<B: HostFloats>(grad_out: FloatTensor<B>, weight: FloatTensor<B>, map: &KernelMap) -> FloatTensor<B> {
     let (c_in, c_out) = (weight.shape()[1], weight.shape()[2]);
+    count_conv_flops(map.pairs().input.len(), c_in, c_out);
     in_kernel(Kernel::ConvInputGrad, || {
         on_host!(B, [grad_out, weight], [map.n_in(), c_in], |T| {
             cpu::pair_conv(&T::host::<B>(&grad_out), c_out, &T::host::<B>(&weight), c_in, map.n_in(), PairDirection::Backward, map.pairs(), map.identity_offset())
@@ -232,6 +234,7 @@ fn cpu_input_grad<B: HostFloats>(grad_out: FloatTensor<B>, weight: FloatTensor<B
 fn cpu_weight_grad<B: HostFloats>(features: FloatTensor<B>, grad_out: FloatTensor<B>, map: &KernelMap) -> FloatTensor<B> {
     let (c_in, c_out) = (features.shape()[1], grad_out.shape()[1]);
     let pairs = map.pairs();
+    count_conv_flops(pairs.input.len(), c_in, c_out);
     let out = in_kernel(Kernel::ConvWeightGrad, || {
         on_host!(B, [features, grad_out], [map.volume(), c_in * c_out], |T| {
             cpu::weight_grad(&T::host::<B>(&features), c_in, &T::host::<B>(&grad_out), c_out, pairs, map.identity_offset())

@@ -7,7 +7,9 @@
 //!   weight gradient's f32 kernel for CPUs with AVX-512.
 //! - `cube`: the op's CubeCL kernels for GPUs (wgpu/Vulkan, CUDA, ROCm).
 //! - [`backend`]: the Burn backend extension and its `Autodiff` backward.
-//! - [`cpu_norm`], [`batch_norm`]: batch norm (+ ReLU) as one op with its own backward.
+//! - [`cpu_norm`], [`batch_norm`]: batch norm (+ ReLU, + a residual's sum) as one op with its
+//!   own backward.
+//! - [`concat`]: channel concatenation (skip connections) as one op with its own backward.
 //! - [`op`]: [`sparse_conv`] on Burn tensors.
 //! - [`tensor`]: [`SparseTensor`], features with coordinates and a shared map cache.
 //! - [`modules`]: convolutions, batch norm, linear and U-Net blocks.
@@ -19,6 +21,7 @@
 mod avx512;
 pub mod backend;
 pub mod batch_norm;
+pub mod concat;
 pub mod coords;
 pub mod cpu;
 pub mod cpu_norm;
@@ -33,6 +36,7 @@ pub mod timing;
 
 pub use backend::SparseConvBackend;
 pub use batch_norm::{BatchNormBackend, Epilogue, batch_norm_eval, batch_norm_train};
+pub use concat::{ChannelConcatBackend, concat_channels};
 pub use coords::{Coord, CoordError, CoordIndex};
 pub use kernel_map::{KernelMap, MapKind, NeighborTable};
 pub use op::sparse_conv;

@@ -61,6 +61,15 @@ pub enum Kernel {
 
 static KERNEL_NANOS: [AtomicU64; 5] = [const { AtomicU64::new(0) }; 5];
 
+/// Floating-point operations of the convolution kernels run so far (2 per multiply-add).
+static CONV_FLOPS: AtomicU64 = AtomicU64::new(0);
+
+/// Adds a convolution kernel's `2·pairs·c_in·c_out` operations to the process-wide count, so the
+/// benchmarks can set a network's conv time against the machine's GEMM ceiling.
+pub(crate) fn count_conv_flops(pairs: usize, c_in: usize, c_out: usize) {
+    CONV_FLOPS.fetch_add(2 * (pairs * c_in * c_out) as u64, Ordering::Relaxed);
+}
+
 /// Runs `f`, adding its wall time to `kernel`'s process-wide total. The CPU backends wrap their
 /// kernels in it, so the benchmarks can print what the rest of a step (Burn's graph, its
 /// elementwise ops, the optimiser) costs beside them. GPU kernels are asynchronous and not
@@ -81,6 +90,8 @@ pub struct KernelTimes {
     pub conv_input_grad_ms: f64,
     pub conv_weight_grad_ms: f64,
     pub batch_norm_ms: f64,
+    /// Operations of the three convolution kernels, in GFLOP (2 per multiply-add).
+    pub conv_gflop: f64,
 }
 
 impl KernelTimes {
@@ -93,6 +104,7 @@ impl KernelTimes {
             conv_input_grad_ms: ms(Kernel::ConvInputGrad),
             conv_weight_grad_ms: ms(Kernel::ConvWeightGrad),
             batch_norm_ms: ms(Kernel::BatchNorm),
+            conv_gflop: CONV_FLOPS.load(Ordering::Relaxed) as f64 / 1e9,
         }
     }
 
@@ -105,7 +117,13 @@ impl KernelTimes {
             conv_input_grad_ms: d(self.conv_input_grad_ms, earlier.conv_input_grad_ms),
             conv_weight_grad_ms: d(self.conv_weight_grad_ms, earlier.conv_weight_grad_ms),
             batch_norm_ms: d(self.batch_norm_ms, earlier.batch_norm_ms),
+            conv_gflop: d(self.conv_gflop, earlier.conv_gflop),
         }
+    }
+
+    /// GFLOP/s of the three convolution kernels together.
+    pub fn conv_gflops(&self) -> f64 {
+        self.conv_gflop / ((self.conv_forward_ms + self.conv_input_grad_ms + self.conv_weight_grad_ms) / 1e3)
     }
 
     /// All kinds together.

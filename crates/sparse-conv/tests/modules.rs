@@ -1,11 +1,12 @@
 //! Modules that run as the op where Burn has a layer of its own give that layer's results: the
 //! per-voxel linear (a 1×1×1 convolution over the identity map) against `Linear::forward`, and a
-//! 1×1×1 `SubmanifoldConv3d` against a matmul, with their gradients, on every backend.
+//! 1×1×1 `SubmanifoldConv3d` against a matmul, with their gradients, on every backend; and the
+//! channel concatenation of skip connections against Burn's `cat`.
 
 mod common;
 
 use common::*;
-use sparse_conv::SparseTensor;
+use sparse_conv::{SparseTensor, concat_channels};
 use sparse_conv::burn::nn::LinearConfig;
 use sparse_conv::burn::tensor::{DType, Tensor, TensorData};
 use sparse_conv::modules::{SubmanifoldConv3dConfig, per_voxel_linear};
@@ -50,5 +51,30 @@ fn pointwise_submanifold_conv_is_a_matmul() {
         let ours = values(conv.forward(SparseTensor::new(x.clone(), coords).unwrap()).into_features());
         let expected = values(x.matmul(tensor2(&w, [c_in, c_out], &t.device, t.dtype)));
         assert_close(&ours, &expected, t.tol * 10.0, &format!("{}: 1×1×1 conv", t.name));
+    }
+}
+
+/// `concat_channels` equals Burn's `cat` along the channels, and its backward splits the
+/// gradient into each side's channels (here with a non-uniform upstream gradient, and one side
+/// used twice so its gradients add up).
+#[test]
+fn channel_concatenation_matches_burns_cat() {
+    for t in targets() {
+        let ad = t.device.clone().autodiff();
+        let (c_a, c_b) = (5, 3);
+        let g = tensor2(&random_values(&mut rng(9), ROWS * (c_a + c_b)), [ROWS, c_a + c_b], &ad, t.dtype);
+        let run = |ours: bool| {
+            let a = tensor2(&random_values(&mut rng(10), ROWS * c_a), [ROWS, c_a], &ad, t.dtype).require_grad();
+            let b = tensor2(&random_values(&mut rng(11), ROWS * c_b), [ROWS, c_b], &ad, t.dtype).require_grad();
+            let y = if ours { concat_channels(a.clone(), b.clone()) } else { Tensor::cat(vec![a.clone(), b.clone()], 1) };
+            let loss = (y.clone() * g.clone()).sum() + (b.clone() * b.clone()).sum();
+            let grads = loss.backward();
+            [values(y), values(a.grad(&grads).unwrap()), values(b.grad(&grads).unwrap())]
+        };
+        let (ours, burns) = (run(true), run(false));
+        for (what, (a, e)) in ["output", "first side's gradient", "second side's gradient"].iter().zip(ours.iter().zip(&burns)) {
+            assert_eq!(a.len(), e.len(), "{}: {what} size", t.name);
+            assert_close(a, e, t.tol, &format!("{}: {what}", t.name));
+        }
     }
 }

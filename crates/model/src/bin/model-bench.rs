@@ -127,4 +127,7 @@ fn print_kernels(k: Option<KernelTimes>, wall_ms: f64) {
         k.batch_norm_ms,
         wall_ms - k.total_ms()
     );
+    if k.conv_gflop > 0.0 {
+        println!("    conv kernels: {:.1} GFLOP at {:.1} GFLOP/s", k.conv_gflop, k.conv_gflops());
+    }
 }
