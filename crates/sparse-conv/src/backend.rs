@@ -154,7 +154,11 @@ impl HostFloats for NdArray {
         match t {
             NdArrayTensor::F32(s) => match s.view().to_slice() {
                 Some(v) => Cow::Borrowed(v),
-                None => Cow::Owned(s.view().iter().copied().collect()),
+                None => {
+                    let v = s.view();
+                    // SAFETY: the pointer, shape and strides are the live view's.
+                    Cow::Owned(unsafe { strided_2d(v.as_ptr(), v.shape(), v.strides()) }.unwrap_or_else(|| v.iter().copied().collect()))
+                }
             },
             other => panic!("expected an f32 tensor, got {:?}", other.dtype()),
         }
@@ -163,11 +167,36 @@ impl HostFloats for NdArray {
         match t {
             NdArrayTensor::F64(s) => match s.view().to_slice() {
                 Some(v) => Cow::Borrowed(v),
-                None => Cow::Owned(s.view().iter().copied().collect()),
+                None => {
+                    let v = s.view();
+                    // SAFETY: as in `host_f32`.
+                    Cow::Owned(unsafe { strided_2d(v.as_ptr(), v.shape(), v.strides()) }.unwrap_or_else(|| v.iter().copied().collect()))
+                }
             },
             other => panic!("expected an f64 tensor, got {:?}", other.dtype()),
         }
     }
+}
+
+/// A strided `[rows, C]` view's values in row-major order, row by row (`None` for other ranks).
+/// ndarray's own iterator over a dynamic-rank view indexes element by element; the views that
+/// reach the op are 2-D (a gradient seed broadcast from a `sum`, a column slice).
+///
+/// # Safety
+/// `ptr`, `shape` and `strides` (in elements) must describe a valid view.
+unsafe fn strided_2d<T: Copy>(ptr: *const T, shape: &[usize], strides: &[isize]) -> Option<Vec<T>> {
+    let (&[rows, c], &[rs, cs]) = (shape, strides) else { return None };
+    let mut out = Vec::with_capacity(rows * c);
+    for i in 0..rows {
+        // SAFETY: (i, j) lies inside the view for i < rows, j < c.
+        let row = unsafe { ptr.offset(i as isize * rs) };
+        if cs == 1 {
+            out.extend_from_slice(unsafe { std::slice::from_raw_parts(row, c) });
+        } else {
+            out.extend((0..c).map(|j| unsafe { *row.offset(j as isize * cs) }));
+        }
+    }
+    Some(out)
 }
 
 /// An element type of the CPU kernels, read from a CPU backend's tensor.

@@ -1,5 +1,5 @@
-//! Empty input, one voxel, a voxel with no neighbours, and a level with a single parent, on every
-//! backend's kernels.
+//! Empty input, one voxel, a voxel with no neighbours, a level with a single parent, and strided
+//! (transposed, broadcast) tensors, on every backend's kernels.
 
 mod common;
 
@@ -92,4 +92,35 @@ fn sparse_tensor_rejects_bad_coordinates() {
     assert!(err.to_string().contains("appears twice"), "{err}");
     let err = SparseTensor::new(Tensor::zeros([3, 1], &dev), vec![[0, 1, 1, 1]]).unwrap_err();
     assert!(err.to_string().contains("3 feature rows for 1"), "{err}");
+}
+
+/// A transposed view as the features and a broadcast gradient seed give the values and gradients
+/// of their contiguous copies (the CPU backends read strided views row by row).
+#[test]
+fn strided_tensors_give_the_results_of_contiguous_ones() {
+    for t in targets() {
+        let ad = t.device.clone().autodiff();
+        let (n, c_in, c_out) = (200, 6, 4);
+        let coords = random_coords(&mut rng(21), n, 2, 5, 1);
+        let index = CoordIndex::build(&coords).unwrap();
+        let map = Arc::new(KernelMap::submanifold(&coords, &index, 3, 1));
+        let x_t = random_values(&mut rng(22), c_in * n);
+        let w = tensor3(&random_values(&mut rng(23), 27 * c_in * c_out), [27, c_in, c_out], &ad, t.dtype).require_grad();
+        let run = |strided: bool| {
+            // [C_in, n] stored, read as [n, C_in] through its transpose; the feature gradient is
+            // returned as [C_in, n] both ways.
+            let x = tensor2(&x_t, [c_in, n], &ad, t.dtype).require_grad();
+            let copy = Tensor::<2>::from_data(x.clone().transpose().to_data(), (&ad, t.dtype)).require_grad();
+            let features = if strided { x.clone().transpose() } else { copy.clone() };
+            let out = sparse_conv(features, w.clone(), &map);
+            // `sum`'s backward seeds a broadcast gradient; the product gives a plain one.
+            let grads = if strided { out.clone().sum().backward() } else { (out.clone() * Tensor::<2>::ones([n, c_out], (&ad, t.dtype))).sum().backward() };
+            let dx = if strided { x.grad(&grads).unwrap() } else { copy.grad(&grads).unwrap().transpose() };
+            [values(out), values(w.grad(&grads).unwrap()), values(dx)]
+        };
+        let (strided, contiguous) = (run(true), run(false));
+        for (what, (a, e)) in ["output", "weight gradient", "feature gradient"].iter().zip(strided.iter().zip(&contiguous)) {
+            assert_close(a, e, t.tol * 10.0, &format!("{}: {what}", t.name));
+        }
+    }
 }
