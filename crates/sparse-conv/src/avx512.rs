@@ -1,22 +1,26 @@
-//! The weight gradient's f32 kernel for x86-64 CPUs with AVX-512: its micro-kernel reads each
-//! pair's input and output-gradient rows in place, through the kernel map, and accumulates the
-//! outer products in registers. The general path ([`crate::cpu::weight_grad`]) gathers both rows
-//! into tiles and lets matrixmultiply pack the tiles again before multiplying.
+//! The op's f32 kernels for x86-64 CPUs with AVX-512.
 //!
-//! (The forward and feature gradient stay on the general path: a micro-kernel reading their
-//! rows in place was measured slower from 64 channels on, its scattered first reads stalling
-//! the FMAs where the general path's gather copies stream.)
+//! - Weight gradient: the micro-kernel reads each pair's input and output-gradient rows in
+//!   place, through the kernel map, and accumulates the outer products in registers. The
+//!   general path ([`crate::cpu::weight_grad`]) gathers both rows into tiles and lets
+//!   matrixmultiply pack the tiles again before multiplying.
+//! - Forward and feature gradient ([`pair_conv`]): each chunk of an offset's pairs is gathered
+//!   into a row tile (a streaming copy: a micro-kernel reading the rows in place was measured
+//!   slower from 64 channels on, its scattered first reads stalling the FMAs), multiplied with
+//!   `W_k` packed once per call into 32-column panels, and each register tile is added straight
+//!   into its destination rows. The general path copies the tile again (matrixmultiply's
+//!   packing), repacks `W_k` for every chunk, and adds a product buffer in a pass of its own.
 //!
-//! Same sums as the general path, cut at the same fixed pair counts, so results are
-//! bit-identical at any thread count (they differ from the general path's in the last bits:
-//! each partial sums its pairs in another order).
+//! Same sums as the general path over the same fixed chunks, so results are bit-identical at any
+//! thread count (they differ from the general path's in the last bits: the products sum their
+//! terms in another order).
 
 use std::arch::x86_64::*;
 use std::sync::OnceLock;
 
 use rayon::prelude::*;
 
-use crate::cpu::{SyncPtr, grad_chunks, scratch};
+use crate::cpu::{PairDirection, SyncPtr, grad_chunks, scratch};
 use crate::kernel_map::OffsetPairs;
 
 /// Columns per tile: two 16-lane vectors.
@@ -32,6 +36,27 @@ const PAIR_BLOCK: usize = 32;
 pub fn available() -> bool {
     static AVAILABLE: OnceLock<bool> = OnceLock::new();
     *AVAILABLE.get_or_init(|| std::arch::is_x86_feature_detected!("avx512f") && std::env::var("PMUNET_AVX512").map_or(true, |v| v != "0"))
+}
+
+/// The float at `p` in every lane. (Through a load intrinsic rather than `*p`, and with
+/// `wrapping_add` in the loops: the dev profile keeps debug assertions, whose pointer checks on
+/// every dereference and `add` would sit in the innermost loop.)
+///
+/// # Safety
+/// AVX-512F; `p` readable.
+#[inline(always)]
+unsafe fn broadcast(p: *const f32) -> __m512 {
+    unsafe { _mm512_broadcastss_ps(_mm_load_ss(p)) }
+}
+
+/// The 16 floats at `p`. (A masked load: `_mm512_loadu_ps` is a `read_unaligned`, whose
+/// debug-assertion check and stack copy would sit in the innermost loop.)
+///
+/// # Safety
+/// AVX-512F; 16 floats readable at `p`.
+#[inline(always)]
+unsafe fn load(p: *const f32) -> __m512 {
+    unsafe { _mm512_maskz_loadu_ps(0xFFFF, p) }
 }
 
 /// Lane mask of vector `v` of a tile whose first `cols` columns are real.
@@ -71,12 +96,12 @@ unsafe fn pair_outer_products<const R: usize>(
             }
         }
         for (&x, &g) in xs.iter().zip(gs) {
-            let g = g.add(j0);
+            let g = g.wrapping_add(j0);
             let b0 = _mm512_maskz_loadu_ps(m0, g);
-            let b1 = _mm512_maskz_loadu_ps(m1, g.add(16));
-            let x = x.add(i0);
+            let b1 = _mm512_maskz_loadu_ps(m1, g.wrapping_add(16));
+            let x = x.wrapping_add(i0);
             for r in 0..R {
-                let a = _mm512_set1_ps(*x.add(r));
+                let a = broadcast(x.wrapping_add(r));
                 acc[r][0] = _mm512_fmadd_ps(a, b0, acc[r][0]);
                 acc[r][1] = _mm512_fmadd_ps(a, b1, acc[r][1]);
             }
@@ -87,6 +112,178 @@ unsafe fn pair_outer_products<const R: usize>(
             _mm512_mask_storeu_ps(o.add(16), m1, acc[1]);
         }
     }
+}
+
+/// `out_r[..cols] (+)= Σ_kk a[r·lda + kk] · panel[kk][..cols]` for `R` rows: a row tile times
+/// one 32-column panel of a packed weight, each row's sums added to (or, without `accumulate`,
+/// written over) its own destination.
+///
+/// # Safety
+/// AVX-512F; `a` readable for `R` rows of `lda ≥ kc` floats, `panel` for `kc` rows of 32, each
+/// `out[r]` writable (and, to accumulate, initialised) for `cols ≤ 32` floats.
+#[allow(clippy::needless_range_loop)]
+#[target_feature(enable = "avx512f")]
+unsafe fn tile_times_panel<const R: usize>(a: *const f32, lda: usize, kc: usize, panel: *const f32, out: &[*mut f32], cols: usize, accumulate: bool) {
+    unsafe {
+        let (m0, m1) = (mask(cols, 0), mask(cols, 1));
+        let mut acc = [[_mm512_setzero_ps(); 2]; R];
+        let (mut a, mut panel) = (a, panel);
+        for _ in 0..kc {
+            let b0 = load(panel);
+            let b1 = load(panel.wrapping_add(16));
+            for r in 0..R {
+                let x = broadcast(a.wrapping_add(r * lda));
+                acc[r][0] = _mm512_fmadd_ps(x, b0, acc[r][0]);
+                acc[r][1] = _mm512_fmadd_ps(x, b1, acc[r][1]);
+            }
+            a = a.wrapping_add(1);
+            panel = panel.wrapping_add(NR);
+        }
+        for r in 0..R {
+            let o = out[r];
+            let (mut v0, mut v1) = (acc[r][0], acc[r][1]);
+            if accumulate {
+                v0 = _mm512_add_ps(_mm512_maskz_loadu_ps(m0, o), v0);
+                v1 = _mm512_add_ps(_mm512_maskz_loadu_ps(m1, o.add(16)), v1);
+            }
+            _mm512_mask_storeu_ps(o, m0, v0);
+            _mm512_mask_storeu_ps(o.add(16), m1, v1);
+        }
+    }
+}
+
+/// Rows per chunk of an offset's pairs in [`pair_conv`]: the unit of parallel work, whose
+/// gathered tile stays in L2 while every panel passes over it.
+const PAIR_CHUNK: usize = 256;
+
+/// Every offset's `[c_src, c_dst]` matrix (`W_k`, or `W_kᵀ` read through the strides
+/// `(rs, cs)` of its rows and columns) packed as 32-column panels: panel `p` of offset `k` holds
+/// `kc` rows of 32 floats (zero past `c_dst`), at `(k·panels + p)·c_src·32`.
+fn pack_panels(weight: &[f32], volume: usize, c_src: usize, c_dst: usize, rs: usize, cs: usize) -> Vec<f32> {
+    let panels = c_dst.div_ceil(NR);
+    let mut packed = vec![0.0f32; volume * panels * c_src * NR];
+    if packed.is_empty() {
+        return packed;
+    }
+    packed.par_chunks_mut(panels * c_src * NR).enumerate().for_each(|(k, dst)| {
+        let w = &weight[k * c_src * c_dst..][..c_src * c_dst];
+        for (p, panel) in dst.chunks_exact_mut(c_src * NR).enumerate() {
+            for (kk, row) in panel.chunks_exact_mut(NR).enumerate() {
+                for (j, v) in row.iter_mut().enumerate().take(c_dst - p * NR) {
+                    *v = w[kk * rs + (p * NR + j) * cs];
+                }
+            }
+        }
+    });
+    packed
+}
+
+/// [`crate::cpu::pair_conv`] for f32 on AVX-512; same arguments and result, up to rounding.
+#[allow(clippy::too_many_arguments)]
+pub fn pair_conv(src: &[f32], c_src: usize, weight: &[f32], c_dst: usize, n_dst: usize, direction: PairDirection, pairs: &OffsetPairs, identity: Option<usize>) -> Vec<f32> {
+    assert!(available(), "AVX-512F kernels called on a CPU without AVX-512F");
+    let volume = pairs.start.len() - 1;
+    assert_eq!(weight.len(), volume * c_src * c_dst, "weight does not match the map and channels");
+    if n_dst == 0 || c_dst == 0 {
+        return vec![0.0; n_dst * c_dst];
+    }
+    // Forward multiplies by W_k (c_in × c_out, row-major), the feature gradient by W_kᵀ.
+    let (rs, cs) = match direction {
+        PairDirection::Forward => (c_dst, 1),
+        PairDirection::Backward => (1, c_src),
+    };
+    let (gather_side, scatter_side) = match direction {
+        PairDirection::Forward => (&pairs.input, &pairs.output),
+        PairDirection::Backward => (&pairs.output, &pairs.input),
+    };
+    let panels = c_dst.div_ceil(NR);
+    let packed = pack_panels(weight, volume, c_src, c_dst, rs, cs);
+    let panel_of = |k: usize, p: usize| packed[(k * panels + p) * c_src * NR..].as_ptr();
+    let mut out = scratch::<f32>(n_dst * c_dst);
+    let out_ptr = SyncPtr(out.as_mut_ptr().cast::<f32>());
+    let out_ptr = &out_ptr;
+    // Multiplies the `m` rows at `tile` (row stride `lda`) with offset k's panels `panel_range`
+    // and adds each row's products to destination row `dst(r)` (writes them, without
+    // `accumulate`).
+    let multiply = |k: usize, panel_range: std::ops::Range<usize>, tile: *const f32, lda: usize, m: usize, dst: &dyn Fn(usize) -> usize, accumulate: bool| {
+        let mut rows = [std::ptr::null_mut::<f32>(); MR];
+        for p in panel_range {
+            let (j0, panel) = (p * NR, panel_of(k, p));
+            let cols = NR.min(c_dst - j0);
+            for r0 in (0..m).step_by(MR) {
+                let r_count = MR.min(m - r0);
+                for (r, row) in rows.iter_mut().enumerate().take(r_count) {
+                    // SAFETY: destination rows are < n_dst.
+                    *row = unsafe { out_ptr.0.add(dst(r0 + r) * c_dst + j0) };
+                }
+                // SAFETY: the tile holds m rows of lda ≥ c_src floats, the panel c_src rows of
+                // 32; destination rows are written by this call only (see below).
+                let a = unsafe { tile.add(r0 * lda) };
+                macro_rules! rows {
+                    ($($r:literal)*) => {
+                        match r_count {
+                            $($r => unsafe { tile_times_panel::<$r>(a, lda, c_src, panel, &rows[..$r], cols, accumulate) },)*
+                            _ => unreachable!(),
+                        }
+                    };
+                }
+                rows!(1 2 3 4 5 6 7 8 9 10 11 12);
+            }
+        }
+    };
+    let mut initialised = false;
+    if let Some(k) = identity {
+        assert_eq!(pairs.start[k + 1] - pairs.start[k], n_dst, "the identity offset must pair every row with itself");
+        assert!(src.len() >= n_dst * c_src, "the identity offset reads {n_dst} source rows, the source has fewer");
+        // The centre pairs (r, r) in row order: its products write every output row, read in
+        // place, so the output is not zeroed first.
+        (0..n_dst.div_ceil(PAIR_CHUNK)).into_par_iter().for_each(|chunk| {
+            let r0 = chunk * PAIR_CHUNK;
+            let m = PAIR_CHUNK.min(n_dst - r0);
+            multiply(k, 0..panels, src[r0 * c_src..].as_ptr(), c_src, m, &|r| r0 + r, false);
+        });
+        initialised = true;
+    }
+    if !initialised {
+        out.par_chunks_mut(1 << 16).for_each(|c| c.iter_mut().for_each(|v| {
+            v.write(0.0);
+        }));
+    }
+    for k in (0..volume).filter(|&k| Some(k) != identity) {
+        let (s, e) = (pairs.start[k], pairs.start[k + 1]);
+        if s == e {
+            continue;
+        }
+        // An offset with few pairs has few chunks: its panels are then split into groups, so
+        // that every thread gets work (each output element is still one tile call's sum, so the
+        // split does not change the result).
+        let chunks = (e - s).div_ceil(PAIR_CHUNK);
+        let groups = panels.min((2 * rayon::current_num_threads()).div_ceil(chunks)).max(1);
+        let per_group = panels.div_ceil(groups);
+        (0..chunks * groups).into_par_iter().for_each_init(
+            || scratch::<f32>(PAIR_CHUNK * c_src),
+            |tile, unit| {
+                let (chunk, group) = (unit / groups, unit % groups);
+                let panel_range = group * per_group..((group + 1) * per_group).min(panels);
+                let a = s + chunk * PAIR_CHUNK;
+                let b = (a + PAIR_CHUNK).min(e);
+                let tile = tile.as_mut_ptr().cast::<f32>();
+                for (j, &r) in gather_side[a..b].iter().enumerate() {
+                    // SAFETY: row r of the source and row j < PAIR_CHUNK of the tile.
+                    unsafe { std::ptr::copy_nonoverlapping(src.as_ptr().add(r as usize * c_src), tile.add(j * c_src), c_src) };
+                }
+                // Within offset k each destination row appears once, so chunks running at once
+                // write disjoint rows; offsets run one after another, each row summing them in
+                // offset order.
+                let dst = |j: usize| scatter_side[a + j] as usize;
+                multiply(k, panel_range, tile, c_src, b - a, &dst, true);
+            },
+        );
+    }
+    // SAFETY: every element was written (the identity's products or the zero fill);
+    // MaybeUninit<f32> has f32's layout.
+    let mut out = std::mem::ManuallyDrop::new(out);
+    unsafe { Vec::from_raw_parts(out.as_mut_ptr().cast::<f32>(), out.len(), out.capacity()) }
 }
 
 /// [`crate::cpu::weight_grad`] for f32 on AVX-512; same arguments and result.

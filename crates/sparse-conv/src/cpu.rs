@@ -45,6 +45,15 @@ pub trait Element:
     fn weight_grad_native(_x: &[Self], _c_in: usize, _grad_out: &[Self], _c_out: usize, _pairs: &OffsetPairs) -> Option<Vec<Self>> {
         None
     }
+
+    /// [`pair_conv`] by a kernel specific to this type and CPU, where one runs.
+    #[allow(clippy::too_many_arguments)]
+    fn pair_conv_native(
+        _src: &[Self], _c_src: usize, _weight: &[Self], _c_dst: usize, _n_dst: usize,
+        _direction: PairDirection, _pairs: &OffsetPairs, _identity: Option<usize>,
+    ) -> Option<Vec<Self>> {
+        None
+    }
 }
 
 impl Element for f32 {
@@ -68,6 +77,14 @@ impl Element for f32 {
     #[cfg(target_arch = "x86_64")]
     fn weight_grad_native(x: &[f32], c_in: usize, grad_out: &[f32], c_out: usize, pairs: &OffsetPairs) -> Option<Vec<f32>> {
         crate::avx512::available().then(|| crate::avx512::weight_grad(x, c_in, grad_out, c_out, pairs))
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    fn pair_conv_native(
+        src: &[f32], c_src: usize, weight: &[f32], c_dst: usize, n_dst: usize,
+        direction: PairDirection, pairs: &OffsetPairs, identity: Option<usize>,
+    ) -> Option<Vec<f32>> {
+        crate::avx512::available().then(|| crate::avx512::pair_conv(src, c_src, weight, c_dst, n_dst, direction, pairs, identity))
     }
 }
 
@@ -259,6 +276,9 @@ pub fn pair_conv<T: Element>(
     pairs: &OffsetPairs,
     identity: Option<usize>,
 ) -> Vec<T> {
+    if let Some(out) = T::pair_conv_native(src, c_src, weight, c_dst, n_dst, direction, pairs, identity) {
+        return out;
+    }
     let volume = pairs.start.len() - 1;
     assert_eq!(weight.len(), volume * c_src * c_dst, "weight does not match the map and channels");
     if n_dst == 0 || c_dst == 0 {

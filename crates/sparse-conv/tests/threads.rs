@@ -22,11 +22,20 @@ fn forward_backward(map: &Arc<KernelMap>, x: &[f64], w: &[f64], g: &[f64], c: us
 
 /// Dense enough that outputs have many neighbours and tiles and gradient chunks are many.
 fn dense_case() -> (Arc<KernelMap>, Vec<f64>, Vec<f64>, Vec<f64>, usize) {
+    case(20_000, 16)
+}
+
+/// Few pairs per offset and several column panels (with a partial one): the CPU kernel then
+/// splits an offset's work by panels, more finely at more threads.
+fn sparse_wide_case() -> (Arc<KernelMap>, Vec<f64>, Vec<f64>, Vec<f64>, usize) {
+    case(1_500, 80)
+}
+
+fn case(voxels: usize, c: usize) -> (Arc<KernelMap>, Vec<f64>, Vec<f64>, Vec<f64>, usize) {
     let mut r = rng(31);
-    let coords = random_coords(&mut r, 20_000, 2, 24, 1);
+    let coords = random_coords(&mut r, voxels, 2, 24, 1);
     let index = CoordIndex::build(&coords).unwrap();
     let map = Arc::new(KernelMap::submanifold(&coords, &index, 3, 1));
-    let c = 16;
     let x = random_values(&mut r, map.n_in() * c);
     let w = random_values(&mut r, map.volume() * c * c);
     let g = random_values(&mut r, map.n_out() * c);
@@ -39,15 +48,20 @@ fn count_differing(a: &[f64], b: &[f64]) -> usize {
 
 #[test]
 fn results_do_not_depend_on_thread_count() {
-    let (map, x, w, g, c) = dense_case();
+    for (map, x, w, g, c) in [dense_case(), sparse_wide_case()] {
+        same_results_at_every_thread_count(&map, &x, &w, &g, c);
+    }
+}
+
+fn same_results_at_every_thread_count(map: &Arc<KernelMap>, x: &[f64], w: &[f64], g: &[f64], c: usize) {
     #[allow(deprecated)]
     for device in [Device::flex(), Device::ndarray()] {
         let single = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
-        let reference = single.install(|| forward_backward(&map, &x, &w, &g, c, &device));
+        let reference = single.install(|| forward_backward(map, x, w, g, c, &device));
         for threads in [1, 2, 8] {
             let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
             for run in 0..4 {
-                let got = pool.install(|| forward_backward(&map, &x, &w, &g, c, &device));
+                let got = pool.install(|| forward_backward(map, x, w, g, c, &device));
                 for (what, (a, b)) in ["output", "feature gradient", "weight gradient"].iter().zip(got.iter().zip(&reference)) {
                     let differing = count_differing(a, b);
                     assert_eq!(differing, 0, "{device:?}: {what} differs in {differing} values at {threads} threads, run {run}");
