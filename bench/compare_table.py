@@ -252,6 +252,24 @@ def main():
         "(it varies from call to call and can be 0), so spconv's multi-thread conv timings come from an "
         "implementation that can return wrong rows.",
     ]
+    # What 1.5x spconv's training step would ask of pmunet's convolutions: the step's conv work
+    # (model-bench's conv_gflop) in the time left after everything that is not a conv kernel.
+    sp_step = get(part("minkunet"), "minkunet", "train", "train_b2", "median_ms")
+    for b in BACKENDS:
+        k, step, ceiling = get(model2[b], "train_kernels"), get(model2[b], "train_step_ms"), get(conv[b], "sgemm", "gflops")
+        if any(isinstance(v, Missing) for v in (k, step, ceiling, sp_step)) or not k.get("conv_gflop"):
+            continue
+        conv_ms = k["conv_forward_ms"] + k["conv_input_grad_ms"] + k["conv_weight_grad_ms"]
+        other_ms, target_ms = step - conv_ms, sp_step / TIME_TARGET
+        line = (f"pmunet {b}'s training step: {k['conv_gflop']:.0f} GFLOP of convolution in {conv_ms:,.0f} ms "
+                f"({k['conv_gflop'] / conv_ms * 1e3:.0f} GFLOP/s, {100 * k['conv_gflop'] / conv_ms * 1e3 / ceiling:.0f} % of its "
+                f"SGEMM ceiling) and {other_ms:,.0f} ms of everything else; {TIME_TARGET}x spconv's step is {target_ms:,.0f} ms, ")
+        if target_ms > other_ms:
+            need = k["conv_gflop"] / (target_ms - other_ms) * 1e3
+            line += f"which would need the convolutions at {need:.0f} GFLOP/s, {100 * need / ceiling:.0f} % of that ceiling."
+        else:
+            line += "less than the non-convolution time alone."
+        notes.append(line)
     for key in ("load_before",):  # load after includes this run itself
         try:
             load1 = float(meta.get(key, "").split()[0])

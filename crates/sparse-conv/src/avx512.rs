@@ -203,9 +203,10 @@ pub fn pair_conv(src: &[f32], c_src: usize, weight: &[f32], c_dst: usize, n_dst:
     let out_ptr = SyncPtr(out.as_mut_ptr().cast::<f32>());
     let out_ptr = &out_ptr;
     // Multiplies the `m` rows at `tile` (row stride `lda`) with offset k's panels `panel_range`
-    // and adds each row's products to destination row `dst(r)` (writes them, without
-    // `accumulate`).
-    let multiply = |k: usize, panel_range: std::ops::Range<usize>, tile: *const f32, lda: usize, m: usize, dst: &dyn Fn(usize) -> usize, accumulate: bool| {
+    // and adds each row's products to its destination row, `dst[r]` or, for the identity
+    // offset (`dst` empty), `first + r`; without `accumulate` it writes them.
+    let multiply = |k: usize, panel_range: std::ops::Range<usize>, tile: *const f32, lda: usize, m: usize, dst: &[u32], first: usize, accumulate: bool| {
+        let dst = |r: usize| if dst.is_empty() { first + r } else { dst[r] as usize };
         let mut rows = [std::ptr::null_mut::<f32>(); MR];
         for p in panel_range {
             let (j0, panel) = (p * NR, panel_of(k, p));
@@ -240,7 +241,7 @@ pub fn pair_conv(src: &[f32], c_src: usize, weight: &[f32], c_dst: usize, n_dst:
         (0..n_dst.div_ceil(PAIR_CHUNK)).into_par_iter().for_each(|chunk| {
             let r0 = chunk * PAIR_CHUNK;
             let m = PAIR_CHUNK.min(n_dst - r0);
-            multiply(k, 0..panels, src[r0 * c_src..].as_ptr(), c_src, m, &|r| r0 + r, false);
+            multiply(k, 0..panels, src[r0 * c_src..].as_ptr(), c_src, m, &[], r0, false);
         });
         initialised = true;
     }
@@ -275,8 +276,7 @@ pub fn pair_conv(src: &[f32], c_src: usize, weight: &[f32], c_dst: usize, n_dst:
                 // Within offset k each destination row appears once, so chunks running at once
                 // write disjoint rows; offsets run one after another, each row summing them in
                 // offset order.
-                let dst = |j: usize| scatter_side[a + j] as usize;
-                multiply(k, panel_range, tile, c_src, b - a, &dst, true);
+                multiply(k, panel_range, tile, c_src, b - a, &scatter_side[a..b], 0, true);
             },
         );
     }
