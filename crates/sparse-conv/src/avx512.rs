@@ -232,23 +232,24 @@ pub fn pair_conv(src: &[f32], c_src: usize, weight: &[f32], c_dst: usize, n_dst:
             }
         }
     };
-    let mut initialised = false;
-    if let Some(k) = identity {
-        assert_eq!(pairs.start[k + 1] - pairs.start[k], n_dst, "the identity offset must pair every row with itself");
-        assert!(src.len() >= n_dst * c_src, "the identity offset reads {n_dst} source rows, the source has fewer");
-        // The centre pairs (r, r) in row order: its products write every output row, read in
-        // place, so the output is not zeroed first.
-        (0..n_dst.div_ceil(PAIR_CHUNK)).into_par_iter().for_each(|chunk| {
-            let r0 = chunk * PAIR_CHUNK;
-            let m = PAIR_CHUNK.min(n_dst - r0);
-            multiply(k, 0..panels, src[r0 * c_src..].as_ptr(), c_src, m, &[], r0, false);
-        });
-        initialised = true;
-    }
-    if !initialised {
-        out.par_chunks_mut(1 << 16).for_each(|c| c.iter_mut().for_each(|v| {
-            v.write(0.0);
-        }));
+    match identity {
+        Some(k) => {
+            assert_eq!(pairs.start[k + 1] - pairs.start[k], n_dst, "the identity offset must pair every row with itself");
+            assert!(src.len() >= n_dst * c_src, "the identity offset reads {n_dst} source rows, the source has fewer");
+            // The centre pairs (r, r) in row order: its products write every output row, its
+            // source rows read in place, so the output is not zeroed first.
+            (0..n_dst.div_ceil(PAIR_CHUNK)).into_par_iter().for_each(|chunk| {
+                let r0 = chunk * PAIR_CHUNK;
+                let m = PAIR_CHUNK.min(n_dst - r0);
+                multiply(k, 0..panels, src[r0 * c_src..].as_ptr(), c_src, m, &[], r0, false);
+            });
+        }
+        // No offset covers every row: the sums start from zero.
+        None => out.par_chunks_mut(1 << 16).for_each(|c| {
+            c.iter_mut().for_each(|v| {
+                v.write(0.0);
+            })
+        }),
     }
     for k in (0..volume).filter(|&k| Some(k) != identity) {
         let (s, e) = (pairs.start[k], pairs.start[k + 1]);
