@@ -232,6 +232,10 @@ pub fn pair_conv(src: &[f32], c_src: usize, weight: &[f32], c_dst: usize, n_dst:
             }
         }
     };
+    let written_once = identity.is_none() && scatter_side.len() == n_dst && {
+        let mut seen = vec![false; n_dst];
+        scatter_side.iter().all(|&r| !std::mem::replace(&mut seen[r as usize], true))
+    };
     match identity {
         Some(k) => {
             assert_eq!(pairs.start[k + 1] - pairs.start[k], n_dst, "the identity offset must pair every row with itself");
@@ -244,6 +248,9 @@ pub fn pair_conv(src: &[f32], c_src: usize, weight: &[f32], c_dst: usize, n_dst:
                 multiply(k, 0..panels, src[r0 * c_src..].as_ptr(), c_src, m, &[], r0, false);
             });
         }
+        // Every destination row is one pair's (an up map's forward, a down map's feature
+        // gradient): the offsets write their products, nothing to start from.
+        None if written_once => {}
         // No offset covers every row: the sums start from zero.
         None => out.par_chunks_mut(1 << 16).for_each(|c| {
             c.iter_mut().for_each(|v| {
@@ -277,7 +284,7 @@ pub fn pair_conv(src: &[f32], c_src: usize, weight: &[f32], c_dst: usize, n_dst:
                 // Within offset k each destination row appears once, so chunks running at once
                 // write disjoint rows; offsets run one after another, each row summing them in
                 // offset order.
-                multiply(k, panel_range, tile, c_src, b - a, &scatter_side[a..b], 0, true);
+                multiply(k, panel_range, tile, c_src, b - a, &scatter_side[a..b], 0, !written_once);
             },
         );
     }
