@@ -14,6 +14,7 @@
 
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
 use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
+use burn::backend::autodiff::NodeId;
 use burn::backend::autodiff::grads::Gradients;
 use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
 use burn::backend::tensor::FloatTensor;
@@ -339,21 +340,30 @@ impl<B: BatchNormBackend> Backward<B, 3> for BatchNormBackward {
     type State = (FloatTensor<B>, FloatTensor<B>, FloatTensor<B>, FloatTensor<B>, f64, bool, bool);
 
     fn backward(self, ops: Ops<Self::State, 3>, grads: &mut Gradients, _checkpointer: &mut Checkpointer) {
-        let [node_x, node_gamma, node_beta] = ops.parents;
+        let ids = ops.parents.map(|node| node.map(|n| n.id));
         let grad = grads.consume::<B>(&ops.node);
         let (x, stats, gamma, beta, epsilon, relu, batch_stats) = ops.state;
-        let c = gamma.shape()[0];
-        let params = B::batch_norm_param_grads(x.clone(), grad.clone(), stats.clone(), gamma.clone(), beta.clone(), epsilon, relu);
-        let param_row = |i: usize| B::float_reshape(B::float_slice(params.clone(), &[Slice::from(i..i + 1), Slice::from(0..c)]), Shape::new([c]));
-        if let Some(node) = node_gamma {
-            grads.register::<B>(node.id, param_row(0));
-        }
-        if let Some(node) = node_beta {
-            grads.register::<B>(node.id, param_row(1));
-        }
-        if let Some(node) = node_x {
-            grads.register::<B>(node.id, B::batch_norm_input_grad(x, grad, stats, gamma, beta, params, epsilon, relu, batch_stats));
-        }
+        register_grads::<B>(grads, ids, [x, grad, stats, gamma, beta], epsilon, relu, batch_stats);
+    }
+}
+
+/// Registers the gradients of features, γ and β (parents `[x, γ, β]`) of a batch norm whose
+/// output gradient is `grad`: one `param_grads` pass, whose result the features' gradient needs
+/// too. `tensors` are `[x, grad, stats, gamma, beta]`.
+fn register_grads<B: BatchNormBackend>(grads: &mut Gradients, ids: [Option<NodeId>; 3], tensors: [FloatTensor<B>; 5], epsilon: f64, relu: bool, batch_stats: bool) {
+    let [x_id, gamma_id, beta_id] = ids;
+    let [x, grad, stats, gamma, beta] = tensors;
+    let c = gamma.shape()[0];
+    let params = B::batch_norm_param_grads(x.clone(), grad.clone(), stats.clone(), gamma.clone(), beta.clone(), epsilon, relu);
+    let param_row = |i: usize| B::float_reshape(B::float_slice(params.clone(), &[Slice::from(i..i + 1), Slice::from(0..c)]), Shape::new([c]));
+    if let Some(id) = gamma_id {
+        grads.register::<B>(id, param_row(0));
+    }
+    if let Some(id) = beta_id {
+        grads.register::<B>(id, param_row(1));
+    }
+    if let Some(id) = x_id {
+        grads.register::<B>(id, B::batch_norm_input_grad(x, grad, stats, gamma, beta, params, epsilon, relu, batch_stats));
     }
 }
 
@@ -367,24 +377,13 @@ impl<B: BatchNormBackend> Backward<B, 4> for BatchNormAddReluBackward {
     /// Through the ReLU's mask first; what passes is the residual's gradient and the batch
     /// norm's output gradient.
     fn backward(self, ops: Ops<Self::State, 4>, grads: &mut Gradients, _checkpointer: &mut Checkpointer) {
-        let [node_x, node_gamma, node_beta, node_residual] = ops.parents;
+        let [x_id, gamma_id, beta_id, residual_id] = ops.parents.map(|node| node.map(|n| n.id));
         let grad = grads.consume::<B>(&ops.node);
         let (x, stats, gamma, beta, y, epsilon, batch_stats) = ops.state;
         let dz = B::batch_norm_relu_grad(y, grad);
-        let c = gamma.shape()[0];
-        let params = B::batch_norm_param_grads(x.clone(), dz.clone(), stats.clone(), gamma.clone(), beta.clone(), epsilon, false);
-        let param_row = |i: usize| B::float_reshape(B::float_slice(params.clone(), &[Slice::from(i..i + 1), Slice::from(0..c)]), Shape::new([c]));
-        if let Some(node) = node_gamma {
-            grads.register::<B>(node.id, param_row(0));
-        }
-        if let Some(node) = node_beta {
-            grads.register::<B>(node.id, param_row(1));
-        }
-        if let Some(node) = node_x {
-            grads.register::<B>(node.id, B::batch_norm_input_grad(x, dz.clone(), stats, gamma, beta, params, epsilon, false, batch_stats));
-        }
-        if let Some(node) = node_residual {
-            grads.register::<B>(node.id, dz);
+        register_grads::<B>(grads, [x_id, gamma_id, beta_id], [x, dz.clone(), stats, gamma, beta], epsilon, false, batch_stats);
+        if let Some(id) = residual_id {
+            grads.register::<B>(id, dz);
         }
     }
 }
