@@ -4,7 +4,7 @@
 //! - [`coords`]: batch-indexed voxel coordinates and their hash index.
 //! - [`kernel_map`]: rulebooks for submanifold, down-sampling and transposed convolutions.
 //! - [`cpu`]: the op's math over slices (forward, feature and weight gradients); `avx512`: the
-//!   weight gradient's f32 kernel for CPUs with AVX-512.
+//!   f32 micro-kernels of all three for CPUs with AVX-512.
 //! - `cube`: the op's CubeCL kernels for GPUs (wgpu/Vulkan, CUDA, ROCm).
 //! - [`backend`]: the Burn backend extension and its `Autodiff` backward.
 //! - [`cpu_norm`], [`batch_norm`]: batch norm (+ ReLU, + a residual's sum) as one op with its
