@@ -20,7 +20,7 @@ use std::sync::OnceLock;
 
 use rayon::prelude::*;
 
-use crate::cpu::{PairDirection, SyncPtr, grad_chunks, scratch};
+use crate::cpu::{PairDirection, SyncPtr, assume_init, grad_chunks, scratch};
 use crate::kernel_map::OffsetPairs;
 
 /// Columns per tile: two 16-lane vectors.
@@ -288,10 +288,9 @@ pub fn pair_conv(src: &[f32], c_src: usize, weight: &[f32], c_dst: usize, n_dst:
             },
         );
     }
-    // SAFETY: every element was written (the identity's products or the zero fill);
-    // MaybeUninit<f32> has f32's layout.
-    let mut out = std::mem::ManuallyDrop::new(out);
-    unsafe { Vec::from_raw_parts(out.as_mut_ptr().cast::<f32>(), out.len(), out.capacity()) }
+    // SAFETY: every element was written: by the identity's products, the zero fill, or (written
+    // once) the one pair of each row.
+    unsafe { assume_init(out) }
 }
 
 /// [`crate::cpu::weight_grad`] for f32 on AVX-512; same arguments and result.
@@ -369,10 +368,8 @@ pub fn weight_grad(x: &[f32], c_in: usize, grad_out: &[f32], c_out: usize, pairs
             }
         }
     });
-    // SAFETY: every block was written, by its offset's first chunk or the zero fill above;
-    // MaybeUninit<f32> has f32's layout.
-    let mut grad = std::mem::ManuallyDrop::new(grad);
-    unsafe { Vec::from_raw_parts(grad.as_mut_ptr().cast::<f32>(), grad.len(), grad.capacity()) }
+    // SAFETY: every block was written, by its offset's first chunk or the zero fill above.
+    unsafe { assume_init(grad) }
 }
 
 #[cfg(test)]

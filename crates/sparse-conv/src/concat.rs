@@ -16,10 +16,8 @@ use burn::backend::tensor::FloatTensor;
 use burn::backend::{Autodiff, Backend, Dispatch, Flex, NdArray, TensorMetadata, backend_extension};
 use burn::tensor::{Shape, Slice, Tensor};
 use burn_cubecl::CubeBackend;
-use rayon::prelude::*;
-
 use crate::backend::{Host, on_host};
-use crate::cpu::Element;
+use crate::cpu::{Element, filled_in_chunks};
 
 /// A backend that concatenates and splits `[rows, C]` features along the channels.
 #[backend_extension(NdArray, Flex, Cube, Fusion, Autodiff)]
@@ -46,24 +44,18 @@ pub fn concat_rows<T: Element>(a: &[T], c_a: usize, b: &[T], c_b: usize) -> Vec<
     let c = c_a + c_b;
     let rows = a.len().checked_div(c_a).or(b.len().checked_div(c_b)).unwrap_or(0);
     assert!(a.len() == rows * c_a && b.len() == rows * c_b, "concatenated features must have the same rows");
-    let mut out = Vec::<T>::with_capacity(rows * c);
-    if c > 0 {
-        out.spare_capacity_mut()[..rows * c].par_chunks_mut(CHUNK_ROWS * c).enumerate().for_each(|(chunk, dst)| {
-            let first = chunk * CHUNK_ROWS;
-            for (r, row) in dst.chunks_exact_mut(c).enumerate() {
-                let (left, right) = row.split_at_mut(c_a);
-                for (d, &s) in left.iter_mut().zip(&a[(first + r) * c_a..][..c_a]) {
-                    d.write(s);
-                }
-                for (d, &s) in right.iter_mut().zip(&b[(first + r) * c_b..][..c_b]) {
-                    d.write(s);
-                }
+    filled_in_chunks(rows * c, CHUNK_ROWS * c, |chunk, dst| {
+        let first = chunk * CHUNK_ROWS;
+        for (r, row) in dst.chunks_exact_mut(c).enumerate() {
+            let (left, right) = row.split_at_mut(c_a);
+            for (d, &s) in left.iter_mut().zip(&a[(first + r) * c_a..][..c_a]) {
+                d.write(s);
             }
-        });
-    }
-    // SAFETY: every row of every chunk was written in full above.
-    unsafe { out.set_len(rows * c) };
-    out
+            for (d, &s) in right.iter_mut().zip(&b[(first + r) * c_b..][..c_b]) {
+                d.write(s);
+            }
+        }
+    })
 }
 
 /// Channels `start..end` of the `c`-channel rows of `x`, contiguous.
@@ -71,20 +63,14 @@ pub fn channel_rows<T: Element>(x: &[T], c: usize, start: usize, end: usize) -> 
     assert!(start <= end && end <= c, "channel range {start}..{end} outside {c} channels");
     let width = end - start;
     let rows = x.len().checked_div(c).unwrap_or(0);
-    let mut out = Vec::<T>::with_capacity(rows * width);
-    if width > 0 {
-        out.spare_capacity_mut()[..rows * width].par_chunks_mut(CHUNK_ROWS * width).enumerate().for_each(|(chunk, dst)| {
-            let first = chunk * CHUNK_ROWS;
-            for (r, row) in dst.chunks_exact_mut(width).enumerate() {
-                for (d, &s) in row.iter_mut().zip(&x[(first + r) * c + start..][..width]) {
-                    d.write(s);
-                }
+    filled_in_chunks(rows * width, CHUNK_ROWS * width, |chunk, dst| {
+        let first = chunk * CHUNK_ROWS;
+        for (r, row) in dst.chunks_exact_mut(width).enumerate() {
+            for (d, &s) in row.iter_mut().zip(&x[(first + r) * c + start..][..width]) {
+                d.write(s);
             }
-        });
-    }
-    // SAFETY: every row of every chunk was written in full above.
-    unsafe { out.set_len(rows * width) };
-    out
+        }
+    })
 }
 
 macro_rules! cpu_backend {

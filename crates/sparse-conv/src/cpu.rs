@@ -253,6 +253,27 @@ pub(crate) fn scratch<T>(len: usize) -> Vec<std::mem::MaybeUninit<T>> {
     v
 }
 
+/// `v` as the values written into it.
+///
+/// # Safety
+/// Every element of `v` must have been written.
+pub(crate) unsafe fn assume_init<T>(v: Vec<std::mem::MaybeUninit<T>>) -> Vec<T> {
+    let mut v = std::mem::ManuallyDrop::new(v);
+    // SAFETY: MaybeUninit<T> has T's layout; the caller vouches for every element.
+    unsafe { Vec::from_raw_parts(v.as_mut_ptr().cast::<T>(), v.len(), v.capacity()) }
+}
+
+/// A `len`-element output written in parallel, `chunk` elements per task (the last may be
+/// shorter), without zeroing it first: `fill(i, dst)` gets chunk `i` and must write every
+/// element of it.
+pub(crate) fn filled_in_chunks<T: Send>(len: usize, chunk: usize, fill: impl Fn(usize, &mut [std::mem::MaybeUninit<T>]) + Sync) -> Vec<T> {
+    let mut out = Vec::with_capacity(len);
+    out.spare_capacity_mut()[..len].par_chunks_mut(chunk.max(1)).enumerate().for_each(|(i, dst)| fill(i, dst));
+    // SAFETY: the chunks cover all `len` elements and `fill` writes every element of each.
+    unsafe { out.set_len(len) };
+    out
+}
+
 /// A raw pointer tasks share, each writing its own disjoint part.
 pub(crate) struct SyncPtr<T>(pub(crate) *mut T);
 unsafe impl<T> Send for SyncPtr<T> {}
@@ -303,19 +324,15 @@ pub fn pair_conv<T: Element>(
         // output is not zeroed first (a whole pass over it, and its page faults, saved).
         Some(k) if c_src > 0 => {
             let w = &weight[k * c_src * c_dst..];
-            let mut out = Vec::<T>::with_capacity(n_dst * c_dst);
-            out.spare_capacity_mut()[..n_dst * c_dst].par_chunks_mut(CHUNK_ROWS * c_dst).zip(src.par_chunks(CHUNK_ROWS * c_src)).for_each(
-                |(dst, rows)| {
-                    let m = rows.len() / c_src;
-                    // SAFETY: matrixmultiply writes C without reading it when beta is zero.
-                    unsafe {
-                        serial_gemm(m, c_src, c_dst, rows.as_ptr(), c_src as isize, 1, w.as_ptr(), rsb, csb, T::ZERO, dst.as_mut_ptr().cast::<T>(), c_dst as isize, 1);
-                    }
-                },
-            );
-            // SAFETY: the identity offset has n_dst pairs (asserted), so every row was written.
-            unsafe { out.set_len(n_dst * c_dst) };
-            out
+            // The identity offset has n_dst pairs (asserted): its chunks write every row.
+            filled_in_chunks(n_dst * c_dst, CHUNK_ROWS * c_dst, |chunk, dst| {
+                let m = dst.len() / c_dst;
+                let rows = &src[chunk * CHUNK_ROWS * c_src..][..m * c_src];
+                // SAFETY: matrixmultiply writes C without reading it when beta is zero.
+                unsafe {
+                    serial_gemm(m, c_src, c_dst, rows.as_ptr(), c_src as isize, 1, w.as_ptr(), rsb, csb, T::ZERO, dst.as_mut_ptr().cast::<T>(), c_dst as isize, 1);
+                }
+            })
         }
         _ => vec![T::ZERO; n_dst * c_dst],
     };

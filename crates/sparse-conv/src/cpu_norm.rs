@@ -18,7 +18,7 @@ use std::mem::MaybeUninit;
 
 use rayon::prelude::*;
 
-use crate::cpu::Element;
+use crate::cpu::{Element, filled_in_chunks};
 
 /// Rows per partial sum and per parallel task.
 const CHUNK_ROWS: usize = 1024;
@@ -139,16 +139,12 @@ pub fn normalize_add_relu<T: Element>(x: &[T], stats: &[T], gamma: &[T], beta: &
 pub fn relu_grad<T: Element>(y: &[T], grad_out: &[T]) -> Vec<T> {
     assert_eq!(y.len(), grad_out.len(), "ReLU output and its gradient differ in size");
     const ELEMS: usize = 1 << 16;
-    let mut out = Vec::<T>::with_capacity(y.len());
-    out.spare_capacity_mut().par_chunks_mut(ELEMS).zip(y.par_chunks(ELEMS).zip(grad_out.par_chunks(ELEMS))).for_each(|(dst, (y, g))| {
-        let (y, g) = (&y[..dst.len()], &g[..dst.len()]);
+    filled_in_chunks(y.len(), ELEMS, |chunk, dst| {
+        let (y, g) = (&y[chunk * ELEMS..][..dst.len()], &grad_out[chunk * ELEMS..][..dst.len()]);
         for j in 0..dst.len() {
             dst[j].write(if y[j] <= T::ZERO { T::ZERO } else { g[j] });
         }
-    });
-    // SAFETY: the chunks cover every element and each is written.
-    unsafe { out.set_len(y.len()) };
-    out
+    })
 }
 
 /// `[Σ dz·x̂ ; Σ dz]` per channel, i.e. `[dγ ; dβ]`, where `dz` is `dy` through the ReLU's mask
@@ -252,16 +248,10 @@ pub fn input_grad<T: Element>(
     })
 }
 
-/// A `len`-element output written chunk by chunk in parallel (`CHUNK_ROWS` rows each), without
-/// zeroing it first; `fill` must write every element of the chunk it is given.
+/// A `len`-element output of `c`-channel rows written [`CHUNK_ROWS`] rows per parallel task;
+/// `fill` must write every element of the chunk it is given.
 fn map_rows<T: Element>(len: usize, c: usize, fill: impl Fn(usize, &mut [MaybeUninit<T>]) + Sync) -> Vec<T> {
-    let mut out = Vec::<T>::with_capacity(len);
-    if c > 0 {
-        out.spare_capacity_mut()[..len].par_chunks_mut(CHUNK_ROWS * c).enumerate().for_each(|(chunk, dst)| fill(chunk, dst));
-    }
-    // SAFETY: the chunks cover all `len` elements and `fill` writes every element of each.
-    unsafe { out.set_len(len) };
-    out
+    filled_in_chunks(len, CHUNK_ROWS * c, fill)
 }
 
 #[cfg(test)]
