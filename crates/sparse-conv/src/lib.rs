@@ -11,6 +11,7 @@
 //!   own backward.
 //! - [`concat`]: channel concatenation (skip connections) as one op with its own backward.
 //! - [`op`]: [`sparse_conv`] on Burn tensors.
+//! - [`output_grad`]: a backward pass from a given output gradient ([`backward_from`]).
 //! - [`tensor`]: [`SparseTensor`], features with coordinates and a shared map cache.
 //! - [`modules`]: convolutions, batch norm, linear and U-Net blocks.
 //! - [`scene`]: voxel scenes for benchmarks (a synthetic LiDAR-like scene, `.npy` files).
@@ -30,6 +31,7 @@ pub mod heap;
 pub mod kernel_map;
 pub mod modules;
 pub mod op;
+pub mod output_grad;
 pub mod scene;
 pub mod tensor;
 pub mod timing;
@@ -40,6 +42,7 @@ pub use concat::{ChannelConcatBackend, concat_channels};
 pub use coords::{Coord, CoordError, CoordIndex};
 pub use kernel_map::{KernelMap, MapKind, NeighborTable};
 pub use op::sparse_conv;
+pub use output_grad::{OutputGradBackend, backward_from};
 pub use tensor::{MapCache, SparseTensor};
 
 pub use burn;

@@ -9,9 +9,9 @@ use anyhow::Context;
 use clap::{Parser, ValueEnum};
 use serde::Serialize;
 use sparse_conv::burn::tensor::{Device, DeviceKind, Distribution, Tensor};
-use sparse_conv::timing::{Timing, median_ms, peak_rss_mb, time_ms};
+use sparse_conv::timing::{self, Timing, median_ms, peak_rss_mb, time_ms};
 use sparse_conv::cpu::{self, PairDirection};
-use sparse_conv::{CoordIndex, KernelMap, scene, sparse_conv};
+use sparse_conv::{CoordIndex, KernelMap, backward_from, scene, sparse_conv};
 
 #[derive(Clone, Copy, Debug, ValueEnum, Serialize)]
 #[serde(rename_all = "lowercase")]
@@ -74,7 +74,7 @@ struct Row {
 }
 
 /// What the CPU kernels take by themselves, and what the Burn op adds around them (tensor
-/// conversions, allocation, autodiff bookkeeping, the `sum` seed of the backward).
+/// conversions, allocation, autodiff bookkeeping).
 #[derive(Serialize)]
 struct KernelTimes {
     fwd_ms: f64,
@@ -114,6 +114,9 @@ struct Strided {
     channels: usize,
     down_fwd_bwd_ms: f64,
     up_fwd_bwd_ms: f64,
+    /// Mean in-op kernel time per call (map build and the three conv kernels), by the kernel clock.
+    down_kernels_ms: f64,
+    up_kernels_ms: f64,
 }
 
 #[derive(Serialize)]
@@ -215,25 +218,33 @@ fn measure(args: &Args, scene_coords: &[sparse_conv::Coord]) -> anyhow::Result<R
         let ad = device.clone().autodiff();
         let x = Tensor::<2>::random([n, c], Distribution::Uniform(-1.0, 1.0), &ad).require_grad();
         let w = Tensor::<3>::random([8, c, c], Distribution::Uniform(-0.1, 0.1), &ad).require_grad();
+        // Output gradients made once, as the peer's `backward(grad)` takes them.
+        let (down, coarse) = KernelMap::down(&coords, 2, 1)?;
+        let grad_coarse = Tensor::<2>::random([coarse.len(), c], Distribution::Uniform(-1.0, 1.0), &ad);
+        let grad_fine = Tensor::<2>::random([n, c], Distribution::Uniform(-1.0, 1.0), &ad);
+        let calls = args.warmup + args.runs;
+        let before = timing::KernelTimes::now();
         let down_fwd_bwd_ms = median_ms(args.warmup, args.runs, || {
             let (map, _) = KernelMap::down(&coords, 2, 1).expect("validated coordinates");
             let out = sparse_conv(x.clone(), w.clone(), &Arc::new(map));
-            let grads = out.sum().backward();
+            let grads = backward_from(out, grad_coarse.clone());
             let g = (x.grad(&grads), w.grad(&grads));
             ad.sync().expect("device sync");
             std::hint::black_box(g);
         });
-        let (down, coarse) = KernelMap::down(&coords, 2, 1)?;
+        let down_kernels_ms = timing::KernelTimes::now().per_run_since(&before, calls).total_ms();
         let up = Arc::new(down.transposed());
         let xc = Tensor::<2>::random([coarse.len(), c], Distribution::Uniform(-1.0, 1.0), &ad).require_grad();
+        let before = timing::KernelTimes::now();
         let up_fwd_bwd_ms = median_ms(args.warmup, args.runs, || {
             let out = sparse_conv(xc.clone(), w.clone(), &up);
-            let grads = out.sum().backward();
+            let grads = backward_from(out, grad_fine.clone());
             let g = (xc.grad(&grads), w.grad(&grads));
             ad.sync().expect("device sync");
             std::hint::black_box(g);
         });
-        strided.push(Strided { channels: c, down_fwd_bwd_ms, up_fwd_bwd_ms });
+        let up_kernels_ms = timing::KernelTimes::now().per_run_since(&before, calls).total_ms();
+        strided.push(Strided { channels: c, down_fwd_bwd_ms, up_fwd_bwd_ms, down_kernels_ms, up_kernels_ms });
     }
     let mut scaling = Vec::new();
     if let (true, Some(&c)) = (args.scale.len() > 1, args.channels.first()) {
@@ -264,7 +275,8 @@ fn measure(args: &Args, scene_coords: &[sparse_conv::Coord]) -> anyhow::Result<R
     Ok(report)
 }
 
-/// Forward and forward+backward of the op through Burn (the backward seeded by `sum`).
+/// Forward and forward+backward of the op through Burn, the backward from a given output
+/// gradient (as the peer times it: `out.backward(grad)`, no loss).
 fn time_op(device: &Device, map: &Arc<KernelMap>, c: usize, warmup: usize, runs: usize) -> (Timing, Timing) {
     let (n, volume) = (map.n_in(), map.volume());
     let x = Tensor::<2>::random([n, c], Distribution::Uniform(-1.0, 1.0), device);
@@ -277,9 +289,10 @@ fn time_op(device: &Device, map: &Arc<KernelMap>, c: usize, warmup: usize, runs:
     let ad = device.clone().autodiff();
     let xa = Tensor::<2>::random([n, c], Distribution::Uniform(-1.0, 1.0), &ad).require_grad();
     let wa = Tensor::<3>::random([volume, c, c], Distribution::Uniform(-0.1, 0.1), &ad).require_grad();
+    let grad = Tensor::<2>::random([map.n_out(), c], Distribution::Uniform(-1.0, 1.0), &ad);
     let fwd_bwd = time_ms(warmup, runs, || {
         let out = sparse_conv(xa.clone(), wa.clone(), map);
-        let grads = out.sum().backward();
+        let grads = backward_from(out, grad.clone());
         let gx = xa.grad(&grads).expect("feature gradient");
         let gw = wa.grad(&grads).expect("weight gradient");
         ad.sync().expect("device sync");
@@ -386,6 +399,9 @@ fn print_table(r: &Report) {
     }
     for s in &r.strided {
         println!("down k2s2 C={} fwd+bwd (map included): {:.2} ms; up (transposed) fwd+bwd: {:.2} ms", s.channels, s.down_fwd_bwd_ms, s.up_fwd_bwd_ms);
+        if r.sgemm.is_some() {
+            println!("  in the kernels (mean): down {:.2} ms, up {:.2} ms", s.down_kernels_ms, s.up_kernels_ms);
+        }
     }
     for p in &r.scaling {
         println!(
