@@ -4,16 +4,22 @@
 //!   place, through the kernel map, and accumulates the outer products in registers. The
 //!   general path ([`crate::cpu::weight_grad`]) gathers both rows into tiles and lets
 //!   matrixmultiply pack the tiles again before multiplying.
-//! - Forward and feature gradient ([`pair_conv`]): each chunk of an offset's pairs is gathered
-//!   into a row tile (a streaming copy: a micro-kernel reading the rows in place was measured
-//!   slower from 64 channels on, its scattered first reads stalling the FMAs), multiplied with
-//!   `W_k` packed once per call into 32-column panels, and each register tile is added straight
-//!   into its destination rows. The general path copies the tile again (matrixmultiply's
-//!   packing), repacks `W_k` for every chunk, and adds a product buffer in a pass of its own.
+//! - Forward and feature gradient ([`pair_conv`]): by destination blocks when each offset's
+//!   pairs come ordered by destination row (as [`crate::KernelMap::pairs`] and
+//!   [`crate::KernelMap::pairs_by_input`] give them): a task owns a block of output rows and, for
+//!   every offset, gathers the source rows of the pairs landing in it into a row tile (a
+//!   streaming copy: a micro-kernel reading the rows in place was measured slower from 64
+//!   channels on, its scattered first reads stalling the FMAs), multiplies the tile with `W_k`
+//!   packed once per call into 32-column panels, and adds each register tile straight into the
+//!   block's rows, which stay in L2 from one offset to the next; one parallel region per call.
+//!   Pairs in another order run offset by offset, in chunks. The general path copies each tile
+//!   again (matrixmultiply's packing), repacks `W_k` for every chunk, and adds a product buffer
+//!   in a pass of its own.
 //!
-//! Same sums as the general path over the same fixed chunks, so results are bit-identical at any
-//! thread count (they differ from the general path's in the last bits: the products sum their
-//! terms in another order).
+//! Every output element is its first term (or zero) plus each later offset's product in offset
+//! order, each product summed in registers the same way on every path and at any block size, so
+//! results are bit-identical at any thread count (they differ from the general path's in the
+//! last bits: its products sum their terms in another order).
 
 use std::arch::x86_64::*;
 use std::sync::OnceLock;
@@ -156,6 +162,12 @@ unsafe fn tile_times_panel<const R: usize>(a: *const f32, lda: usize, kc: usize,
 /// gathered tile stays in L2 while every panel passes over it.
 const PAIR_CHUNK: usize = 256;
 
+/// Output rows per destination block: enough blocks for rayon to balance uneven ones, at least
+/// enough rows that each offset brings a few tiles' worth of pairs, at most an L2-sized block.
+const BLOCKS_PER_THREAD: usize = 8;
+const MIN_BLOCK_ROWS: usize = 64;
+const MAX_BLOCK_ROWS: usize = 512;
+
 /// Every offset's `[c_src, c_dst]` matrix (`W_k`, or `W_kᵀ` read through the strides
 /// `(rs, cs)` of its rows and columns) packed as 32-column panels: panel `p` of offset `k` holds
 /// `kc` rows of 32 floats (zero past `c_dst`), at `(k·panels + p)·c_src·32`.
@@ -236,10 +248,46 @@ pub fn pair_conv(src: &[f32], c_src: usize, weight: &[f32], c_dst: usize, n_dst:
         let mut seen = vec![false; n_dst];
         scatter_side.iter().all(|&r| !std::mem::replace(&mut seen[r as usize], true))
     };
+    if let Some(k) = identity {
+        assert_eq!(pairs.start[k + 1] - pairs.start[k], n_dst, "the identity offset must pair every row with itself");
+        assert!(src.len() >= n_dst * c_src, "the identity offset reads {n_dst} source rows, the source has fewer");
+    }
+    if (0..volume).all(|k| scatter_side[pairs.start[k]..pairs.start[k + 1]].is_sorted()) {
+        // Destination blocks: each task owns a block of output rows and runs every offset's
+        // pairs that land in it, so the block's rows stay in L2 between offsets and a conv is
+        // one parallel region, not one per offset.
+        let block_rows = (n_dst / (BLOCKS_PER_THREAD * rayon::current_num_threads())).clamp(MIN_BLOCK_ROWS, MAX_BLOCK_ROWS);
+        (0..n_dst.div_ceil(block_rows)).into_par_iter().for_each_init(
+            || scratch::<f32>(block_rows * c_src),
+            |tile, block| {
+                let (r0, r1) = (block * block_rows, ((block + 1) * block_rows).min(n_dst));
+                match identity {
+                    Some(k) => multiply(k, 0..panels, src[r0 * c_src..].as_ptr(), c_src, r1 - r0, &[], r0, false),
+                    None if written_once => {}
+                    // SAFETY: rows r0..r1 are this block's.
+                    None => unsafe { std::ptr::write_bytes(out_ptr.0.add(r0 * c_dst), 0, (r1 - r0) * c_dst) },
+                }
+                let tile = tile.as_mut_ptr().cast::<f32>();
+                for k in (0..volume).filter(|&k| Some(k) != identity) {
+                    let (s, e) = (pairs.start[k], pairs.start[k + 1]);
+                    let dst = &scatter_side[s..e];
+                    let a = s + dst.partition_point(|&r| (r as usize) < r0);
+                    let b = s + dst.partition_point(|&r| (r as usize) < r1);
+                    for (j, &r) in gather_side[a..b].iter().enumerate() {
+                        // SAFETY: row r of the source and row j < block_rows of the tile (each
+                        // destination row appears once per offset).
+                        unsafe { std::ptr::copy_nonoverlapping(src.as_ptr().add(r as usize * c_src), tile.add(j * c_src), c_src) };
+                    }
+                    multiply(k, 0..panels, tile, c_src, b - a, &scatter_side[a..b], 0, !written_once);
+                }
+            },
+        );
+        // SAFETY: every row was written by its block: the identity's products, the zero fill, or
+        // (written once) its one pair.
+        return unsafe { assume_init(out) };
+    }
     match identity {
         Some(k) => {
-            assert_eq!(pairs.start[k + 1] - pairs.start[k], n_dst, "the identity offset must pair every row with itself");
-            assert!(src.len() >= n_dst * c_src, "the identity offset reads {n_dst} source rows, the source has fewer");
             // The centre pairs (r, r) in row order: its products write every output row, its
             // source rows read in place, so the output is not zeroed first.
             (0..n_dst.div_ceil(PAIR_CHUNK)).into_par_iter().for_each(|chunk| {
@@ -410,6 +458,54 @@ mod tests {
                     let got = one[(k * c_in + i) * c_out + j] as f64;
                     assert!((got - want).abs() <= 1e-4 * (1.0 + want.abs()), "offset {k} ({i}, {j}): {got} vs {want}");
                 }
+            }
+        }
+    }
+    /// The destination-block path (pairs sorted by destination) and the per-offset path (any
+    /// order) give the same bits, in both directions, with an identity offset (submanifold),
+    /// rows summed from zero (down forward) and rows written once (up forward), at 1 and 2
+    /// threads, in channel counts that leave partial panels and row tiles.
+    #[test]
+    fn destination_blocks_match_the_per_offset_path() {
+        use crate::{Coord, CoordIndex, KernelMap};
+        if !available() {
+            return;
+        }
+        let coords: Vec<Coord> = {
+            let mut c: Vec<Coord> = (0..3000).map(|i: i32| [i % 2, (i * 7) % 23 - 11, (i * 5) % 19 - 9, (i * 3) % 17 - 8]).collect();
+            c.sort();
+            c.dedup();
+            c
+        };
+        let index = CoordIndex::build(&coords).unwrap();
+        let sub = KernelMap::submanifold(&coords, &index, 3, 1);
+        let (down, _) = KernelMap::down(&coords, 2, 1).unwrap();
+        let up = down.transposed();
+        // The pairs with each offset's order reversed: no longer sorted, so the per-offset path.
+        let reversed = |p: &OffsetPairs| {
+            let mut r = OffsetPairs { start: p.start.clone(), input: p.input.clone(), output: p.output.clone() };
+            for k in 0..p.start.len() - 1 {
+                r.input[p.start[k]..p.start[k + 1]].reverse();
+                r.output[p.start[k]..p.start[k + 1]].reverse();
+            }
+            r
+        };
+        let (c_a, c_b) = (45, 37);
+        for map in [&sub, &down, &up] {
+            for (direction, pairs, c_src, c_dst, n_src, n_dst) in [
+                (PairDirection::Forward, map.pairs(), c_a, c_b, map.n_in(), map.n_out()),
+                (PairDirection::Backward, map.pairs_by_input(), c_b, c_a, map.n_out(), map.n_in()),
+            ] {
+                let src: Vec<f32> = (0..n_src * c_src).map(|i| ((i * 37 % 101) as f32 - 50.0) / 50.0).collect();
+                let w: Vec<f32> = (0..map.volume() * c_a * c_b).map(|i| ((i * 53 % 97) as f32 - 48.0) / 480.0).collect();
+                let run = |p: &OffsetPairs, threads: usize| {
+                    rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap().install(|| pair_conv(&src, c_src, &w, c_dst, n_dst, direction, p, map.identity_offset()))
+                };
+                let blocked = run(pairs, 2);
+                assert!(blocked.iter().any(|v| *v != 0.0));
+                let what = format!("{:?} {direction:?}", map.kind());
+                assert!(blocked == run(&reversed(pairs), 2), "{what}: the two paths differ");
+                assert!(blocked == run(pairs, 1), "{what}: the blocks depend on the thread count");
             }
         }
     }

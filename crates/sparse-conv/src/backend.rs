@@ -255,7 +255,7 @@ fn cpu_input_grad<B: HostFloats>(grad_out: FloatTensor<B>, weight: FloatTensor<B
     count_conv_flops(map.pairs().input.len(), c_in, c_out);
     in_kernel(Kernel::ConvInputGrad, || {
         on_host!(B, [grad_out, weight], [map.n_in(), c_in], |T| {
-            cpu::pair_conv(&T::host::<B>(&grad_out), c_out, &T::host::<B>(&weight), c_in, map.n_in(), PairDirection::Backward, map.pairs(), map.identity_offset())
+            cpu::pair_conv(&T::host::<B>(&grad_out), c_out, &T::host::<B>(&weight), c_in, map.n_in(), PairDirection::Backward, map.pairs_by_input(), map.identity_offset())
         })
     })
 }

@@ -80,6 +80,7 @@ pub struct KernelMap {
     /// made only if something asks (the kernels run on `pairs`).
     in_table: OnceLock<Arc<NeighborTable>>,
     pairs: OnceLock<OffsetPairs>,
+    pairs_by_input: OnceLock<OffsetPairs>,
     /// What a backend derives from the map and keeps with it (e.g. the tables uploaded to a GPU),
     /// freed with the map.
     attachments: Mutex<Vec<Arc<dyn Any + Send + Sync>>>,
@@ -141,34 +142,37 @@ impl KernelMap {
         self.out_table.data.iter().filter(|&&i| i != NONE).count()
     }
 
-    /// The pairs grouped by offset, ordered by output row within an offset; built on first use.
+    /// The pairs grouped by offset, ordered by output row within an offset (the forward's
+    /// destination order); built on first use.
     pub fn pairs(&self) -> &OffsetPairs {
         self.pairs.get_or_init(|| {
-            // Two row-major passes (count, then fill) instead of one strided pass per offset.
-            let table = &*self.out_table;
-            let volume = table.volume;
-            let mut start = vec![0usize; volume + 1];
-            for row in table.data.chunks_exact(volume) {
-                for (k, &i) in row.iter().enumerate() {
-                    start[k + 1] += (i != NONE) as usize;
+            let (output, input) = grouped_by_offset(&self.out_table);
+            OffsetPairs { start: output.start, input, output: output.rows }
+        })
+    }
+
+    /// The same pairs ordered by input row within an offset (the feature gradient's destination
+    /// order, which lets its kernel run by destination blocks); built on first use.
+    pub fn pairs_by_input(&self) -> &OffsetPairs {
+        self.pairs_by_input.get_or_init(|| match self.kind {
+            // (i, o) at offset k is (o, i) at the negated offset `volume − 1 − k`: those
+            // pairs, already ordered by their output, with the sides swapped.
+            MapKind::Submanifold { .. } => {
+                let by_output = self.pairs();
+                let volume = self.volume();
+                let mut pairs = OffsetPairs { start: vec![0], input: Vec::with_capacity(by_output.input.len()), output: Vec::with_capacity(by_output.input.len()) };
+                for k in 0..volume {
+                    let mirrored = by_output.start[volume - 1 - k]..by_output.start[volume - k];
+                    pairs.input.extend_from_slice(&by_output.output[mirrored.clone()]);
+                    pairs.output.extend_from_slice(&by_output.input[mirrored]);
+                    pairs.start.push(pairs.input.len());
                 }
+                pairs
             }
-            for k in 0..volume {
-                start[k + 1] += start[k];
+            _ => {
+                let (input, output) = grouped_by_offset(self.in_table_arc());
+                OffsetPairs { start: input.start, input: input.rows, output }
             }
-            let total = start[volume];
-            let (mut input, mut output) = (vec![0u32; total], vec![0u32; total]);
-            let mut next = start[..volume].to_vec();
-            for (o, row) in table.data.chunks_exact(volume).enumerate() {
-                for (k, &i) in row.iter().enumerate() {
-                    if i != NONE {
-                        input[next[k]] = i;
-                        output[next[k]] = o as u32;
-                        next[k] += 1;
-                    }
-                }
-            }
-            OffsetPairs { start, input, output }
         })
     }
 
@@ -200,6 +204,7 @@ impl KernelMap {
             out_table: self.in_table_arc().clone(),
             in_table: OnceLock::from(self.out_table.clone()),
             pairs: OnceLock::new(),
+            pairs_by_input: OnceLock::new(),
             attachments: Mutex::default(),
         }
     }
@@ -243,6 +248,7 @@ impl KernelMap {
             out_table: Arc::new(table),
             in_table: OnceLock::new(),
             pairs: OnceLock::new(),
+            pairs_by_input: OnceLock::new(),
             attachments: Mutex::default(),
         }
     }
@@ -292,6 +298,7 @@ impl KernelMap {
             out_table: Arc::new(out_table),
             in_table: OnceLock::from(Arc::new(in_table)),
             pairs: OnceLock::new(),
+            pairs_by_input: OnceLock::new(),
             attachments: Mutex::default(),
         };
         Ok((map, out_coords))
@@ -336,6 +343,42 @@ fn mirror(table: &NeighborTable) -> NeighborTable {
     out
 }
 
+/// A table's rows grouped by offset.
+struct Grouped {
+    /// `start[k]..start[k + 1]` indexes offset `k`'s entries.
+    start: Vec<usize>,
+    /// The table row of each entry, ascending within an offset.
+    rows: Vec<u32>,
+}
+
+/// Each offset's (table row, neighbour) entries in table-row order, and the neighbours beside
+/// them. Two row-major passes (count, then fill) instead of one strided pass per offset.
+fn grouped_by_offset(table: &NeighborTable) -> (Grouped, Vec<u32>) {
+    let volume = table.volume;
+    let mut start = vec![0usize; volume + 1];
+    for row in table.data.chunks_exact(volume) {
+        for (k, &i) in row.iter().enumerate() {
+            start[k + 1] += (i != NONE) as usize;
+        }
+    }
+    for k in 0..volume {
+        start[k + 1] += start[k];
+    }
+    let total = start[volume];
+    let (mut rows, mut neighbours) = (vec![0u32; total], vec![0u32; total]);
+    let mut next = start[..volume].to_vec();
+    for (r, row) in table.data.chunks_exact(volume).enumerate() {
+        for (k, &i) in row.iter().enumerate() {
+            if i != NONE {
+                rows[next[k]] = r as u32;
+                neighbours[next[k]] = i;
+                next[k] += 1;
+            }
+        }
+    }
+    (Grouped { start, rows }, neighbours)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -373,4 +416,30 @@ mod tests {
         assert_eq!(up.kind(), MapKind::Up { kernel: 2 });
         assert_eq!(up.out_table().row(4)[7], 3);
     }
+    /// Every map's pairs ordered by input hold each offset's pairs of `pairs()`, ascending by
+    /// input row (the feature gradient's blocks rely on the order).
+    #[test]
+    fn pairs_by_input_are_the_pairs_ordered_by_input() {
+        let coords: Vec<Coord> = (0..400).map(|i: i32| [i % 2, (i * 7) % 11 - 5, (i * 5) % 9 - 4, (i * 3) % 7 - 3]).collect();
+        let mut unique = coords.clone();
+        unique.sort();
+        unique.dedup();
+        let index = CoordIndex::build(&unique).unwrap();
+        let sub = KernelMap::submanifold(&unique, &index, 3, 1);
+        let (down, _) = KernelMap::down(&unique, 2, 1).unwrap();
+        let up = down.transposed();
+        for map in [&sub, &down, &up] {
+            let (by_out, by_in) = (map.pairs(), map.pairs_by_input());
+            assert_eq!(by_out.start, by_in.start, "{:?}: offsets", map.kind());
+            for k in 0..map.volume() {
+                let range = by_out.start[k]..by_out.start[k + 1];
+                let mut want: Vec<(u32, u32)> = by_out.input[range.clone()].iter().copied().zip(by_out.output[range.clone()].iter().copied()).collect();
+                want.sort();
+                let got: Vec<(u32, u32)> = by_in.input[range.clone()].iter().copied().zip(by_in.output[range].iter().copied()).collect();
+                assert_eq!(got, want, "{:?}: offset {k}", map.kind());
+            }
+        }
+        assert!(sub.num_pairs() > unique.len(), "the scene must have neighbours");
+    }
 }
+

@@ -310,7 +310,7 @@ fn kernel_times(map: &KernelMap, c: usize, warmup: usize, runs: usize, op_fwd_ms
         std::hint::black_box(cpu::pair_conv(&x, c, &w, c, map.n_out(), PairDirection::Forward, pairs, centre));
     });
     let input_grad_ms = median_ms(warmup, runs, || {
-        std::hint::black_box(cpu::pair_conv(&g, c, &w, c, n, PairDirection::Backward, pairs, centre));
+        std::hint::black_box(cpu::pair_conv(&g, c, &w, c, n, PairDirection::Backward, map.pairs_by_input(), centre));
     });
     let weight_grad_ms = median_ms(warmup, runs, || {
         std::hint::black_box(cpu::weight_grad(&x, c, &g, c, pairs, centre));
