@@ -461,6 +461,7 @@ mod tests {
             }
         }
     }
+
     /// The destination-block path (pairs sorted by destination) and the per-offset path (any
     /// order) give the same bits, in both directions, with an identity offset (submanifold),
     /// rows summed from zero (down forward) and rows written once (up forward), at 1 and 2

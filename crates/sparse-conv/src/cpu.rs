@@ -285,7 +285,10 @@ unsafe impl<T> Sync for SyncPtr<T> {}
 /// Within one offset every destination row appears at most once, so chunks of an offset run in
 /// parallel without conflicts, and each row sums its offsets in the same order at any thread
 /// count. `identity` names an offset whose pairs are `(r, r)` for every row (the submanifold
-/// centre): it runs first as a plain GEMM that initialises the output.
+/// centre): it runs first as a plain GEMM that initialises the output. Pairs ordered by
+/// destination row within each offset ([`crate::KernelMap::pairs`] forward,
+/// [`crate::KernelMap::pairs_by_input`] backward) let the AVX-512 kernel run by destination
+/// blocks; any order gives the same result.
 #[allow(clippy::too_many_arguments)]
 pub fn pair_conv<T: Element>(
     src: &[T],

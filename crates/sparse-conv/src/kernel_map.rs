@@ -145,10 +145,7 @@ impl KernelMap {
     /// The pairs grouped by offset, ordered by output row within an offset (the forward's
     /// destination order); built on first use.
     pub fn pairs(&self) -> &OffsetPairs {
-        self.pairs.get_or_init(|| {
-            let (output, input) = grouped_by_offset(&self.out_table);
-            OffsetPairs { start: output.start, input, output: output.rows }
-        })
+        self.pairs.get_or_init(|| grouped_by_offset(&self.out_table))
     }
 
     /// The same pairs ordered by input row within an offset (the feature gradient's destination
@@ -169,9 +166,10 @@ impl KernelMap {
                 }
                 pairs
             }
+            // The input table's rows are inputs, its entries outputs.
             _ => {
-                let (input, output) = grouped_by_offset(self.in_table_arc());
-                OffsetPairs { start: input.start, input: input.rows, output }
+                let OffsetPairs { start, input, output } = grouped_by_offset(self.in_table_arc());
+                OffsetPairs { start, input: output, output: input }
             }
         })
     }
@@ -343,17 +341,10 @@ fn mirror(table: &NeighborTable) -> NeighborTable {
     out
 }
 
-/// A table's rows grouped by offset.
-struct Grouped {
-    /// `start[k]..start[k + 1]` indexes offset `k`'s entries.
-    start: Vec<usize>,
-    /// The table row of each entry, ascending within an offset.
-    rows: Vec<u32>,
-}
-
-/// Each offset's (table row, neighbour) entries in table-row order, and the neighbours beside
-/// them. Two row-major passes (count, then fill) instead of one strided pass per offset.
-fn grouped_by_offset(table: &NeighborTable) -> (Grouped, Vec<u32>) {
+/// A table's entries as pairs grouped by offset, in table-row order within an offset: the
+/// row as `output`, its entry as `input`. Two row-major passes (count, then fill) instead of one
+/// strided pass per offset.
+fn grouped_by_offset(table: &NeighborTable) -> OffsetPairs {
     let volume = table.volume;
     let mut start = vec![0usize; volume + 1];
     for row in table.data.chunks_exact(volume) {
@@ -365,18 +356,18 @@ fn grouped_by_offset(table: &NeighborTable) -> (Grouped, Vec<u32>) {
         start[k + 1] += start[k];
     }
     let total = start[volume];
-    let (mut rows, mut neighbours) = (vec![0u32; total], vec![0u32; total]);
+    let (mut input, mut output) = (vec![0u32; total], vec![0u32; total]);
     let mut next = start[..volume].to_vec();
-    for (r, row) in table.data.chunks_exact(volume).enumerate() {
+    for (o, row) in table.data.chunks_exact(volume).enumerate() {
         for (k, &i) in row.iter().enumerate() {
             if i != NONE {
-                rows[next[k]] = r as u32;
-                neighbours[next[k]] = i;
+                input[next[k]] = i;
+                output[next[k]] = o as u32;
                 next[k] += 1;
             }
         }
     }
-    (Grouped { start, rows }, neighbours)
+    OffsetPairs { start, input, output }
 }
 
 #[cfg(test)]
