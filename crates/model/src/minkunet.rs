@@ -3,7 +3,7 @@
 use burn::config::Config;
 use burn::module::Module;
 use burn::tensor::Device;
-use sparse_conv::SparseTensor;
+use sparse_conv::{Epilogue, SparseTensor};
 use sparse_conv::modules::{
     ConvBnRelu, ConvBnReluConfig, DeconvBnRelu, DeconvBnReluConfig, ResidualBlock, ResidualBlockConfig, SparseBatchNorm,
     SparseBatchNormConfig, SubmanifoldConv3d, SubmanifoldConv3dConfig,
@@ -123,7 +123,7 @@ impl MinkUNet {
     pub fn forward_levels(&self, x: SparseTensor) -> UNetLevels {
         let mut x = x;
         for (conv, norm) in self.stem.iter().zip(&self.stem_norms) {
-            x = norm.forward_relu(conv.forward(x));
+            x = conv.forward_norm(x, norm, Epilogue::Relu);
         }
         let mut down = vec![x];
         for stage in &self.down {

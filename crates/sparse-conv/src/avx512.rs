@@ -27,6 +27,7 @@ use std::sync::OnceLock;
 use rayon::prelude::*;
 
 use crate::cpu::{PairDirection, SyncPtr, assume_init, grad_chunks, scratch};
+use crate::cpu_norm::ConvEpilogue;
 use crate::kernel_map::OffsetPairs;
 
 /// Columns per tile: two 16-lane vectors.
@@ -192,7 +193,17 @@ fn pack_panels(weight: &[f32], volume: usize, c_src: usize, c_dst: usize, rs: us
 
 /// [`crate::cpu::pair_conv`] for f32 on AVX-512; same arguments and result, up to rounding.
 #[allow(clippy::too_many_arguments)]
-pub fn pair_conv(src: &[f32], c_src: usize, weight: &[f32], c_dst: usize, n_dst: usize, direction: PairDirection, pairs: &OffsetPairs, identity: Option<usize>) -> Vec<f32> {
+pub fn pair_conv(
+    src: &[f32],
+    c_src: usize,
+    weight: &[f32],
+    c_dst: usize,
+    n_dst: usize,
+    direction: PairDirection,
+    pairs: &OffsetPairs,
+    identity: Option<usize>,
+    epilogue: Option<&ConvEpilogue<'_, f32>>,
+) -> Vec<f32> {
     assert!(available(), "AVX-512F kernels called on a CPU without AVX-512F");
     let volume = pairs.start.len() - 1;
     assert_eq!(weight.len(), volume * c_src * c_dst, "weight does not match the map and channels");
@@ -280,6 +291,10 @@ pub fn pair_conv(src: &[f32], c_src: usize, weight: &[f32], c_dst: usize, n_dst:
                     }
                     multiply(k, 0..panels, tile, c_src, b - a, &scatter_side[a..b], 0, !written_once);
                 }
+                if let Some(e) = epilogue {
+                    // SAFETY: the block's rows, all written above (see below), this task's only.
+                    e.apply(r0, unsafe { std::slice::from_raw_parts_mut(out_ptr.0.add(r0 * c_dst), (r1 - r0) * c_dst) });
+                }
             },
         );
         // SAFETY: every row was written by its block: the identity's products, the zero fill, or
@@ -338,7 +353,11 @@ pub fn pair_conv(src: &[f32], c_src: usize, weight: &[f32], c_dst: usize, n_dst:
     }
     // SAFETY: every element was written: by the identity's products, the zero fill, or (written
     // once) the one pair of each row.
-    unsafe { assume_init(out) }
+    let mut out = unsafe { assume_init(out) };
+    if let Some(e) = epilogue {
+        out.par_chunks_mut(PAIR_CHUNK * c_dst).enumerate().for_each(|(chunk, rows)| e.apply(chunk * PAIR_CHUNK, rows));
+    }
+    out
 }
 
 /// [`crate::cpu::weight_grad`] for f32 on AVX-512; same arguments and result.
@@ -500,13 +519,26 @@ mod tests {
                 let src: Vec<f32> = (0..n_src * c_src).map(|i| ((i * 37 % 101) as f32 - 50.0) / 50.0).collect();
                 let w: Vec<f32> = (0..map.volume() * c_a * c_b).map(|i| ((i * 53 % 97) as f32 - 48.0) / 480.0).collect();
                 let run = |p: &OffsetPairs, threads: usize| {
-                    rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap().install(|| pair_conv(&src, c_src, &w, c_dst, n_dst, direction, p, map.identity_offset()))
+                    rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap().install(|| pair_conv(&src, c_src, &w, c_dst, n_dst, direction, p, map.identity_offset(), None))
                 };
                 let blocked = run(pairs, 2);
                 assert!(blocked.iter().any(|v| *v != 0.0));
                 let what = format!("{:?} {direction:?}", map.kind());
                 assert!(blocked == run(&reversed(pairs), 2), "{what}: the two paths differ");
                 assert!(blocked == run(pairs, 1), "{what}: the blocks depend on the thread count");
+                // With a batch norm (+ ReLU, + a residual) on the finished rows: each path applies
+                // it where it finishes rows, with the same result as a pass after the conv.
+                let stats: Vec<f32> = (0..2 * c_dst).map(|j| if j < c_dst { 0.1 * (j % 5) as f32 - 0.2 } else { 0.5 + 0.1 * (j % 3) as f32 }).collect();
+                let (gamma, beta): (Vec<f32>, Vec<f32>) = (0..c_dst).map(|j| (1.0 + 0.05 * j as f32, 0.02 * j as f32 - 0.3)).unzip();
+                let residual: Vec<f32> = (0..n_dst * c_dst).map(|i| ((i * 29 % 89) as f32 - 44.0) / 88.0).collect();
+                for (relu, residual) in [(true, None), (false, Some(&residual[..]))] {
+                    let epilogue = ConvEpilogue::new(&stats, &gamma, &beta, 1e-5, relu, residual);
+                    let run = |p: &OffsetPairs| pair_conv(&src, c_src, &w, c_dst, n_dst, direction, p, map.identity_offset(), Some(&epilogue));
+                    let mut expected = blocked.clone();
+                    epilogue.apply(0, &mut expected);
+                    assert!(run(pairs) == expected, "{what}: the blocks' epilogue differs from a pass after");
+                    assert!(run(&reversed(pairs)) == expected, "{what}: the per-offset path's epilogue differs");
+                }
             }
         }
     }

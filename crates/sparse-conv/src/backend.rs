@@ -20,6 +20,7 @@ use burn_cubecl::CubeBackend;
 use burn::tensor::{Shape, TensorData};
 
 use crate::cpu::{self, Element, PairDirection};
+use crate::cpu_norm;
 use crate::cube;
 use crate::kernel_map::KernelMap;
 use crate::timing::{Kernel, count_conv_flops, in_kernel};
@@ -239,13 +240,29 @@ macro_rules! on_host {
 }
 pub(crate) use on_host;
 
-fn cpu_forward<B: HostFloats>(features: FloatTensor<B>, weight: FloatTensor<B>, map: &KernelMap) -> FloatTensor<B> {
+/// The batch norm with fixed statistics (and its ReLU or a residual's sum and ReLU) that a CPU
+/// forward runs on its finished rows, as [`crate::cpu_norm::ConvEpilogue`] takes it.
+pub(crate) struct NormAfterConv<B: Backend> {
+    pub stats: FloatTensor<B>,
+    pub gamma: FloatTensor<B>,
+    pub beta: FloatTensor<B>,
+    pub residual: Option<FloatTensor<B>>,
+    pub epsilon: f64,
+    pub relu: bool,
+}
+
+pub(crate) fn cpu_forward<B: HostFloats>(features: FloatTensor<B>, weight: FloatTensor<B>, map: &KernelMap, norm: Option<&NormAfterConv<B>>) -> FloatTensor<B> {
     let (c_in, c_out) = (weight.shape()[1], weight.shape()[2]);
     check_shapes(&features.shape(), &weight.shape(), map.n_in(), map.volume());
     count_conv_flops(map.pairs().input.len(), c_in, c_out);
     in_kernel(Kernel::ConvForward, || {
         on_host!(B, [features, weight], [map.n_out(), c_out], |T| {
-            cpu::pair_conv(&T::host::<B>(&features), c_in, &T::host::<B>(&weight), c_out, map.n_out(), PairDirection::Forward, map.pairs(), map.identity_offset())
+            let norm_values = norm.map(|n| (T::host::<B>(&n.stats), T::host::<B>(&n.gamma), T::host::<B>(&n.beta), n.residual.as_ref().map(T::host::<B>)));
+            let epilogue = norm.zip(norm_values.as_ref()).map(|(n, (stats, gamma, beta, residual))| {
+                cpu_norm::ConvEpilogue::new(stats, gamma, beta, n.epsilon, n.relu, residual.as_deref())
+            });
+            let (x, w) = (T::host::<B>(&features), T::host::<B>(&weight));
+            cpu::pair_conv(&x, c_in, &w, c_out, map.n_out(), PairDirection::Forward, map.pairs(), map.identity_offset(), epilogue.as_ref())
         })
     })
 }
@@ -255,7 +272,7 @@ fn cpu_input_grad<B: HostFloats>(grad_out: FloatTensor<B>, weight: FloatTensor<B
     count_conv_flops(map.pairs().input.len(), c_in, c_out);
     in_kernel(Kernel::ConvInputGrad, || {
         on_host!(B, [grad_out, weight], [map.n_in(), c_in], |T| {
-            cpu::pair_conv(&T::host::<B>(&grad_out), c_out, &T::host::<B>(&weight), c_in, map.n_in(), PairDirection::Backward, map.pairs_by_input(), map.identity_offset())
+            cpu::pair_conv(&T::host::<B>(&grad_out), c_out, &T::host::<B>(&weight), c_in, map.n_in(), PairDirection::Backward, map.pairs_by_input(), map.identity_offset(), None)
         })
     })
 }
@@ -284,7 +301,7 @@ macro_rules! cpu_backend {
     ($backend:ty) => {
         impl SparseConvBackend for $backend {
             fn sparse_conv(features: FloatTensor<Self>, weight: FloatTensor<Self>, map: Arc<KernelMap>) -> FloatTensor<Self> {
-                cpu_forward::<Self>(features, weight, &map)
+                cpu_forward::<Self>(features, weight, &map, None)
             }
             fn sparse_conv_input_grad(grad_out: FloatTensor<Self>, weight: FloatTensor<Self>, map: Arc<KernelMap>) -> FloatTensor<Self> {
                 cpu_input_grad::<Self>(grad_out, weight, &map)

@@ -7,6 +7,7 @@
 
 use rayon::prelude::*;
 
+use crate::cpu_norm::ConvEpilogue;
 use crate::kernel_map::OffsetPairs;
 
 /// Pairs per partial sum of the weight gradient.
@@ -50,7 +51,7 @@ pub trait Element:
     #[allow(clippy::too_many_arguments)]
     fn pair_conv_native(
         _src: &[Self], _c_src: usize, _weight: &[Self], _c_dst: usize, _n_dst: usize,
-        _direction: PairDirection, _pairs: &OffsetPairs, _identity: Option<usize>,
+        _direction: PairDirection, _pairs: &OffsetPairs, _identity: Option<usize>, _epilogue: Option<&ConvEpilogue<'_, Self>>,
     ) -> Option<Vec<Self>> {
         None
     }
@@ -82,9 +83,9 @@ impl Element for f32 {
     #[cfg(target_arch = "x86_64")]
     fn pair_conv_native(
         src: &[f32], c_src: usize, weight: &[f32], c_dst: usize, n_dst: usize,
-        direction: PairDirection, pairs: &OffsetPairs, identity: Option<usize>,
+        direction: PairDirection, pairs: &OffsetPairs, identity: Option<usize>, epilogue: Option<&ConvEpilogue<'_, f32>>,
     ) -> Option<Vec<f32>> {
-        crate::avx512::available().then(|| crate::avx512::pair_conv(src, c_src, weight, c_dst, n_dst, direction, pairs, identity))
+        crate::avx512::available().then(|| crate::avx512::pair_conv(src, c_src, weight, c_dst, n_dst, direction, pairs, identity, epilogue))
     }
 }
 
@@ -288,7 +289,8 @@ unsafe impl<T> Sync for SyncPtr<T> {}
 /// centre): it runs first as a plain GEMM that initialises the output. Pairs ordered by
 /// destination row within each offset ([`crate::KernelMap::pairs`] forward,
 /// [`crate::KernelMap::pairs_by_input`] backward) let the AVX-512 kernel run by destination
-/// blocks; any order gives the same result.
+/// blocks; any order gives the same result. `epilogue` (inference: the batch norm after the
+/// conv, with its ReLU or residual) runs on the finished rows.
 #[allow(clippy::too_many_arguments)]
 pub fn pair_conv<T: Element>(
     src: &[T],
@@ -299,8 +301,12 @@ pub fn pair_conv<T: Element>(
     direction: PairDirection,
     pairs: &OffsetPairs,
     identity: Option<usize>,
+    epilogue: Option<&ConvEpilogue<'_, T>>,
 ) -> Vec<T> {
-    if let Some(out) = T::pair_conv_native(src, c_src, weight, c_dst, n_dst, direction, pairs, identity) {
+    if let Some(e) = epilogue {
+        assert_eq!(e.channels(), c_dst, "the epilogue's channels differ from the conv's output");
+    }
+    if let Some(out) = T::pair_conv_native(src, c_src, weight, c_dst, n_dst, direction, pairs, identity, epilogue) {
         return out;
     }
     let volume = pairs.start.len() - 1;
@@ -379,6 +385,9 @@ pub fn pair_conv<T: Element>(
                 }
             },
         );
+    }
+    if let Some(e) = epilogue {
+        out.par_chunks_mut(CHUNK_ROWS * c_dst).enumerate().for_each(|(chunk, rows)| e.apply(chunk * CHUNK_ROWS, rows));
     }
     out
 }

@@ -99,6 +99,15 @@ fn affine<T: Element>(stats: &[T], gamma: &[T], beta: &[T], epsilon: f64) -> (Ve
     (a.into_iter().map(T::from_f64).collect(), b, inv_std)
 }
 
+/// The layer's output for one element: `z = x·a + b`, plus the residual's element with
+/// `RESIDUAL` (whose sum is always followed by ReLU), then ReLU when `relu`. Every forward path
+/// (the passes below and [`ConvEpilogue`]) computes it here, so they agree bit for bit.
+#[inline(always)]
+fn output<T: Element, const RESIDUAL: bool>(x: T, a: T, b: T, residual: T, relu: bool) -> T {
+    let y = if RESIDUAL { x * a + b + residual } else { x * a + b };
+    if (RESIDUAL || relu) && y <= T::ZERO { T::ZERO } else { y }
+}
+
 /// `y = x·a + b`, then ReLU when `relu`: the layer's output.
 pub fn normalize<T: Element>(x: &[T], stats: &[T], gamma: &[T], beta: &[T], epsilon: f64, relu: bool) -> Vec<T> {
     let c = gamma.len();
@@ -107,8 +116,7 @@ pub fn normalize<T: Element>(x: &[T], stats: &[T], gamma: &[T], beta: &[T], epsi
         let rows = &x[chunk * CHUNK_ROWS * c..][..out.len()];
         for (row, dst) in rows.chunks_exact(c).zip(out.chunks_exact_mut(c)) {
             for (((d, &v), &a), &b) in dst.iter_mut().zip(row).zip(&a).zip(&b) {
-                let z = v * a + b;
-                d.write(if relu && z <= T::ZERO { T::ZERO } else { z });
+                d.write(output::<T, false>(v, a, b, T::ZERO, relu));
             }
         }
     })
@@ -127,11 +135,60 @@ pub fn normalize_add_relu<T: Element>(x: &[T], stats: &[T], gamma: &[T], beta: &
         for ((row, skip), dst) in rows.zip(skips).zip(out.chunks_exact_mut(c)) {
             let (skip, a, b, dst) = (&skip[..c], &a[..c], &b[..c], &mut dst[..c]);
             for j in 0..c {
-                let y = row[j] * a[j] + b[j] + skip[j];
-                dst[j].write(if y <= T::ZERO { T::ZERO } else { y });
+                dst[j].write(output::<T, true>(row[j], a[j], b[j], skip[j], true));
             }
         }
     })
+}
+
+/// Batch norm with given statistics (inference), then its ReLU or a residual's sum and ReLU,
+/// applied in place to a convolution's finished output rows: the conv kernels run it on each
+/// block of rows while the block is still in cache, instead of a pass of its own.
+pub struct ConvEpilogue<'a, T> {
+    a: Vec<T>,
+    b: Vec<T>,
+    relu: bool,
+    /// All rows of the residual, `[n_out, C]`.
+    residual: Option<&'a [T]>,
+}
+
+impl<'a, T: Element> ConvEpilogue<'a, T> {
+    /// `stats`, `gamma`, `beta` and `epsilon` as [`normalize`]'s; with `residual`, ReLU follows
+    /// its sum (as [`normalize_add_relu`]) and `relu` is ignored.
+    pub fn new(stats: &[T], gamma: &[T], beta: &[T], epsilon: f64, relu: bool, residual: Option<&'a [T]>) -> Self {
+        let (a, b, _) = affine(stats, gamma, beta, epsilon);
+        ConvEpilogue { a, b, relu, residual }
+    }
+
+    /// Channels of the rows it applies to.
+    pub fn channels(&self) -> usize {
+        self.a.len()
+    }
+
+    /// Applies to whole rows, the first of which is output row `first`.
+    pub fn apply(&self, first: usize, rows: &mut [T]) {
+        let c = self.a.len();
+        let (a, b) = (&self.a[..c], &self.b[..c]);
+        match self.residual {
+            Some(residual) => {
+                let skips = residual[first * c..][..rows.len()].chunks_exact(c);
+                for (row, skip) in rows.chunks_exact_mut(c).zip(skips) {
+                    let (row, skip) = (&mut row[..c], &skip[..c]);
+                    for j in 0..c {
+                        row[j] = output::<T, true>(row[j], a[j], b[j], skip[j], true);
+                    }
+                }
+            }
+            None => {
+                for row in rows.chunks_exact_mut(c) {
+                    let row = &mut row[..c];
+                    for j in 0..c {
+                        row[j] = output::<T, false>(row[j], a[j], b[j], T::ZERO, self.relu);
+                    }
+                }
+            }
+        }
+    }
 }
 
 /// ReLU's backward from its output: `dy` where `y > 0`, else 0 (a NaN output passes `dy`, as

@@ -10,6 +10,8 @@
 //! - [`cpu_norm`], [`batch_norm`]: batch norm (+ ReLU, + a residual's sum) as one op with its
 //!   own backward.
 //! - [`concat`]: channel concatenation (skip connections) as one op with its own backward.
+//! - [`conv_norm`]: a conv and the batch norm after it at inference (fixed statistics, with
+//!   its ReLU or a residual) as one op.
 //! - [`op`]: [`sparse_conv`] on Burn tensors.
 //! - [`output_grad`]: a backward pass from a given output gradient ([`backward_from`]).
 //! - [`tensor`]: [`SparseTensor`], features with coordinates and a shared map cache.
@@ -23,6 +25,7 @@ mod avx512;
 pub mod backend;
 pub mod batch_norm;
 pub mod concat;
+pub mod conv_norm;
 pub mod coords;
 pub mod cpu;
 pub mod cpu_norm;
@@ -39,6 +42,7 @@ pub mod timing;
 pub use backend::SparseConvBackend;
 pub use batch_norm::{BatchNormBackend, Epilogue, batch_norm_eval, batch_norm_train};
 pub use concat::{ChannelConcatBackend, concat_channels};
+pub use conv_norm::{ConvNormBackend, sparse_conv_norm_eval};
 pub use coords::{Coord, CoordError, CoordIndex};
 pub use kernel_map::{KernelMap, MapKind, NeighborTable};
 pub use op::sparse_conv;

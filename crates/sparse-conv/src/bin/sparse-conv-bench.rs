@@ -307,10 +307,10 @@ fn kernel_times(map: &KernelMap, c: usize, warmup: usize, runs: usize, op_fwd_ms
     let values = |len: usize, scale: f32| -> Vec<f32> { (0..len).map(|i| ((i * 7919 % 2001) as f32 / 1000.0 - 1.0) * scale).collect() };
     let (x, w, g) = (values(n * c, 1.0), values(volume * c * c, 0.1), values(map.n_out() * c, 1.0));
     let fwd_ms = median_ms(warmup, runs, || {
-        std::hint::black_box(cpu::pair_conv(&x, c, &w, c, map.n_out(), PairDirection::Forward, pairs, centre));
+        std::hint::black_box(cpu::pair_conv(&x, c, &w, c, map.n_out(), PairDirection::Forward, pairs, centre, None));
     });
     let input_grad_ms = median_ms(warmup, runs, || {
-        std::hint::black_box(cpu::pair_conv(&g, c, &w, c, n, PairDirection::Backward, map.pairs_by_input(), centre));
+        std::hint::black_box(cpu::pair_conv(&g, c, &w, c, n, PairDirection::Backward, map.pairs_by_input(), centre, None));
     });
     let weight_grad_ms = median_ms(warmup, runs, || {
         std::hint::black_box(cpu::weight_grad(&x, c, &g, c, pairs, centre));

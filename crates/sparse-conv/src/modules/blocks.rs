@@ -9,6 +9,7 @@ use super::{
     SparseConvTranspose3dConfig, SubmanifoldConv3d, SubmanifoldConv3dConfig,
 };
 use crate::SparseTensor;
+use crate::batch_norm::Epilogue;
 
 /// Configuration of a [`ConvBnRelu`].
 #[derive(Config, Debug)]
@@ -36,7 +37,7 @@ impl ConvBnReluConfig {
 
 impl ConvBnRelu {
     pub fn forward(&self, x: SparseTensor) -> SparseTensor {
-        self.norm.forward_relu(self.conv.forward(x))
+        self.conv.forward_norm(x, &self.norm, Epilogue::Relu)
     }
 }
 
@@ -66,7 +67,7 @@ impl DeconvBnReluConfig {
 
 impl DeconvBnRelu {
     pub fn forward(&self, x: SparseTensor) -> SparseTensor {
-        self.norm.forward_relu(self.conv.forward(x))
+        self.conv.forward_norm(x, &self.norm, Epilogue::Relu)
     }
 }
 
@@ -115,11 +116,11 @@ impl ResidualBlockConfig {
 
 impl ResidualBlock {
     pub fn forward(&self, x: SparseTensor) -> SparseTensor {
-        let main = self.norm1.forward_relu(self.conv1.forward(x.clone()));
+        let main = self.conv1.forward_norm(x.clone(), &self.norm1, Epilogue::Relu);
         let skip = match &self.shortcut {
-            Some(shortcut) => shortcut.norm.forward(shortcut.conv.forward(x)),
+            Some(shortcut) => shortcut.conv.forward_norm(x, &shortcut.norm, Epilogue::Identity),
             None => x,
         };
-        self.norm2.forward_add_relu(self.conv2.forward(main), skip.into_features())
+        self.conv2.forward_norm(main, &self.norm2, Epilogue::AddRelu(skip.into_features()))
     }
 }

@@ -3,10 +3,15 @@
 use burn::config::Config;
 use burn::module::{Module, Param};
 use burn::nn::Initializer;
+use std::sync::Arc;
+
 use burn::tensor::{Device, Tensor};
 
-use crate::SparseTensor;
+use super::SparseBatchNorm;
+use crate::batch_norm::Epilogue;
+use crate::kernel_map::KernelMap;
 use crate::op::sparse_conv;
+use crate::SparseTensor;
 
 /// `U(±bound)` for a `[K, C_in, C_out]` weight.
 fn uniform_weight(volume: usize, c_in: usize, c_out: usize, bound: f64, device: &Device) -> Param<Tensor<3>> {
@@ -42,14 +47,31 @@ impl SubmanifoldConv3dConfig {
     }
 }
 
+/// The features of a conv's output from its input's features, weight and map: the op alone, or
+/// the op and the batch norm after it.
+type ConvOp<'a> = &'a dyn Fn(Tensor<2>, Tensor<3>, &Arc<KernelMap>) -> Tensor<2>;
+
+/// `norm` with `epilogue` after the conv, as one op where [`SparseBatchNorm::after_conv`] can.
+fn then_norm(norm: &SparseBatchNorm, epilogue: Epilogue) -> impl Fn(Tensor<2>, Tensor<3>, &Arc<KernelMap>) -> Tensor<2> + '_ {
+    move |x, w, map| norm.after_conv(x, w, map, epilogue.clone())
+}
+
 impl SubmanifoldConv3d {
     pub fn forward(&self, x: SparseTensor) -> SparseTensor {
-        let weight = self.weight.val();
+        self.run(x, &|x, w, map| sparse_conv(x, w, map))
+    }
+
+    /// `norm(self.forward(x))` with `epilogue`, one op at inference.
+    pub fn forward_norm(&self, x: SparseTensor, norm: &SparseBatchNorm, epilogue: Epilogue) -> SparseTensor {
+        self.run(x, &then_norm(norm, epilogue))
+    }
+
+    fn run(&self, x: SparseTensor, op: ConvOp<'_>) -> SparseTensor {
         // A 1×1×1 kernel is a per-voxel matmul, but it still runs as the op (over a map of the
         // identity pairs, built in O(N)): the op's GEMM and weight-gradient kernels are several
         // times faster than the backends' matmul on these tall, thin products.
         let map = x.submanifold_map(self.kernel_size);
-        let features = sparse_conv(x.features(), weight, &map);
+        let features = op(x.features(), self.weight.val(), &map);
         x.with_features(features)
     }
 }
@@ -82,8 +104,17 @@ impl SparseConv3dConfig {
 
 impl SparseConv3d {
     pub fn forward(&self, x: SparseTensor) -> SparseTensor {
+        self.run(x, &|x, w, map| sparse_conv(x, w, map))
+    }
+
+    /// `norm(self.forward(x))` with `epilogue`, one op at inference.
+    pub fn forward_norm(&self, x: SparseTensor, norm: &SparseBatchNorm, epilogue: Epilogue) -> SparseTensor {
+        self.run(x, &then_norm(norm, epilogue))
+    }
+
+    fn run(&self, x: SparseTensor, op: ConvOp<'_>) -> SparseTensor {
         let (map, coords) = x.down_map(self.kernel_size);
-        let features = sparse_conv(x.features(), self.weight.val(), &map);
+        let features = op(x.features(), self.weight.val(), &map);
         x.on_level(features, coords, x.stride() * self.kernel_size as i32)
     }
 }
@@ -116,8 +147,17 @@ impl SparseConvTranspose3dConfig {
 
 impl SparseConvTranspose3d {
     pub fn forward(&self, x: SparseTensor) -> SparseTensor {
+        self.run(x, &|x, w, map| sparse_conv(x, w, map))
+    }
+
+    /// `norm(self.forward(x))` with `epilogue`, one op at inference.
+    pub fn forward_norm(&self, x: SparseTensor, norm: &SparseBatchNorm, epilogue: Epilogue) -> SparseTensor {
+        self.run(x, &then_norm(norm, epilogue))
+    }
+
+    fn run(&self, x: SparseTensor, op: ConvOp<'_>) -> SparseTensor {
         let (map, coords, fine) = x.up_map(self.kernel_size);
-        let features = sparse_conv(x.features(), self.weight.val(), &map);
+        let features = op(x.features(), self.weight.val(), &map);
         x.on_level(features, coords, fine)
     }
 }

@@ -3,10 +3,15 @@
 use burn::config::Config;
 use burn::module::Module;
 use burn::nn::{BatchNorm, BatchNormConfig};
+use std::sync::Arc;
+
 use burn::tensor::{Device, Tensor};
 
-use crate::SparseTensor;
 use crate::batch_norm::{Epilogue, batch_norm_eval, batch_norm_train};
+use crate::conv_norm::sparse_conv_norm_eval;
+use crate::kernel_map::KernelMap;
+use crate::op::sparse_conv;
+use crate::SparseTensor;
 
 /// Configuration of a [`SparseBatchNorm`]; the defaults are PyTorch's `BatchNorm1d` (spec §1.6).
 #[derive(Config, Debug)]
@@ -22,7 +27,8 @@ pub struct SparseBatchNormConfig {
 /// updates on an autodiff device with the layer's training flag on, running statistics
 /// otherwise (Burn's `BatchNorm` switch, whose parameters and record it keeps). It runs as the
 /// fused op of [`crate::batch_norm`], with the ReLU after it folded in by [`Self::forward_relu`]
-/// and a residual block's shortcut sum and ReLU by [`Self::forward_add_relu`].
+/// and a residual block's shortcut sum and ReLU by [`Self::forward_add_relu`]; evaluating after
+/// a conv, it runs inside the conv's op ([`Self::after_conv`]).
 #[derive(Module, Debug)]
 pub struct SparseBatchNorm {
     pub inner: BatchNorm,
@@ -54,14 +60,31 @@ impl SparseBatchNorm {
         x.with_features(features)
     }
 
+    /// `epilogue(self(conv))` for the conv of `features` with `weight` over `map`: evaluating, one
+    /// op (the norm runs on the conv's finished rows); training, the conv and then the norm.
+    pub fn after_conv(&self, features: Tensor<2>, weight: Tensor<3>, map: &Arc<KernelMap>, epilogue: Epilogue) -> Tensor<2> {
+        match self.running_stats(&features.device()) {
+            Some((mean, var)) => {
+                let bn = &self.inner;
+                sparse_conv_norm_eval(features, weight, map, mean, var, bn.gamma.val(), bn.beta.val(), bn.epsilon, epilogue)
+            }
+            None => self.features(sparse_conv(features, weight, map), epilogue),
+        }
+    }
+
+    /// The running mean and variance on `device` when the layer normalises with them (not
+    /// training on an autodiff device), else `None` (batch statistics).
+    fn running_stats(&self, device: &Device) -> Option<(Tensor<1>, Tensor<1>)> {
+        let bn = &self.inner;
+        (!(device.is_autodiff() && bn.training.is_enabled())).then(|| (bn.running_mean.value().to_device(device), bn.running_var.value().to_device(device)))
+    }
+
     fn features(&self, x: Tensor<2>, epilogue: Epilogue) -> Tensor<2> {
         let bn = &self.inner;
         let [rows, channels] = x.dims();
         assert_eq!(channels, bn.gamma.dims()[0], "batch norm of {} channels got features of {channels}", bn.gamma.dims()[0]);
         let device = x.device();
-        if !(device.is_autodiff() && bn.training.is_enabled()) {
-            let mean = bn.running_mean.value().to_device(&device);
-            let var = bn.running_var.value().to_device(&device);
+        if let Some((mean, var)) = self.running_stats(&device) {
             return batch_norm_eval(x, mean, var, bn.gamma.val(), bn.beta.val(), bn.epsilon, epilogue);
         }
         let (out, stats) = batch_norm_train(x, bn.gamma.val(), bn.beta.val(), bn.epsilon, epilogue);
