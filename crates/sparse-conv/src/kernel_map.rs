@@ -7,6 +7,7 @@ use std::sync::{Arc, Mutex, OnceLock};
 use rayon::prelude::*;
 
 use crate::coords::{Coord, CoordError, CoordIndex, pack};
+use crate::cpu::SyncPtr;
 
 /// Marks "no row" in a [`NeighborTable`].
 pub const NONE: u32 = u32::MAX;
@@ -221,24 +222,42 @@ impl KernelMap {
         let mut table = NeighborTable::empty(n, volume);
         table.data.par_chunks_mut(volume).zip(coords.par_iter()).enumerate().for_each(
             |(o, (row, c))| {
-                for (k, d) in offsets[..centre].iter().enumerate() {
-                    let q = [c[0] as i64, c[1] as i64 + d[0] as i64, c[2] as i64 + d[1] as i64, c[3] as i64 + d[2] as i64];
-                    if let Some(i) = lookup(index, q) {
-                        row[k] = i;
+                // A group of neighbours' keys first, their slots prefetched, then the probes: the
+                // probes' cache misses overlap (the table is larger than L2).
+                for (group, ds) in offsets[..centre].chunks(PROBE_GROUP).enumerate() {
+                    let mut keys = [None; PROBE_GROUP];
+                    for (key, d) in keys.iter_mut().zip(ds) {
+                        *key = neighbour_key(*c, *d);
+                        if let Some(key) = *key {
+                            index.prefetch_key(key);
+                        }
+                    }
+                    for (j, key) in keys[..ds.len()].iter().enumerate() {
+                        if let Some(i) = key.and_then(|key| index.get_key(key)) {
+                            row[group * PROBE_GROUP + j] = i;
+                        }
                     }
                 }
                 row[centre] = o as u32;
             },
         );
-        // Mirror: if o sees i at offset k, then i sees o at the negated offset.
-        for o in 0..n {
+        // Mirror: if o sees i at offset k, then i sees o at the negated offset. In parallel: the
+        // first halves are only read, and each slot (i, volume − 1 − k) of a second half is
+        // written by the one o that i's neighbour at that offset is.
+        let data = SyncPtr(table.data.as_mut_ptr());
+        let data = &data;
+        (0..n).into_par_iter().for_each(|o| {
             for k in 0..centre {
-                let i = table.data[o * volume + k];
-                if i != NONE {
-                    table.data[i as usize * volume + (volume - 1 - k)] = o as u32;
+                // SAFETY: in bounds (o < n, k < volume, i < n); slot (o, k < centre) is not
+                // written in this loop, slot (i, volume − 1 − k) by this o only (see above).
+                unsafe {
+                    let i = data.0.wrapping_add(o * volume + k).read();
+                    if i != NONE {
+                        data.0.wrapping_add(i as usize * volume + (volume - 1 - k)).write(o as u32);
+                    }
                 }
             }
-        }
+        });
         KernelMap {
             kind: MapKind::Submanifold { kernel },
             n_in: n,
@@ -317,15 +336,12 @@ fn offsets(kernel: usize, lo: i32, stride: i32) -> Vec<[i32; 3]> {
     out
 }
 
-#[inline]
-fn lookup(index: &CoordIndex, q: [i64; 4]) -> Option<u32> {
-    let c: [i32; 4] = [
-        i32::try_from(q[0]).ok()?,
-        i32::try_from(q[1]).ok()?,
-        i32::try_from(q[2]).ok()?,
-        i32::try_from(q[3]).ok()?,
-    ];
-    index.get(c)
+/// Neighbour lookups whose slots are prefetched together.
+const PROBE_GROUP: usize = 16;
+
+/// The packed key of `c + d`, if it is in range.
+fn neighbour_key(c: Coord, d: [i32; 3]) -> Option<u64> {
+    pack([c[0], c[1].checked_add(d[0])?, c[2].checked_add(d[1])?, c[3].checked_add(d[2])?])
 }
 
 /// The in-side table of a submanifold map: input `i` feeds output `o` at offset `k` exactly when
@@ -341,32 +357,58 @@ fn mirror(table: &NeighborTable) -> NeighborTable {
     out
 }
 
+/// Rows per parallel task of [`grouped_by_offset`].
+const GROUP_ROWS: usize = 4096;
+
 /// A table's entries as pairs grouped by offset, in table-row order within an offset: the
-/// row as `output`, its entry as `input`. Two row-major passes (count, then fill) instead of one
-/// strided pass per offset.
+/// row as `output`, its entry as `input`. Two row-major passes (count, then fill), each over
+/// chunks of rows in parallel: a chunk's entries of an offset go after the earlier chunks'.
 fn grouped_by_offset(table: &NeighborTable) -> OffsetPairs {
     let volume = table.volume;
+    let chunk_len = GROUP_ROWS * volume;
+    let counts: Vec<Vec<usize>> = table
+        .data
+        .par_chunks(chunk_len.max(1))
+        .map(|rows| {
+            let mut count = vec![0usize; volume];
+            for row in rows.chunks_exact(volume) {
+                for (k, &i) in row.iter().enumerate() {
+                    count[k] += (i != NONE) as usize;
+                }
+            }
+            count
+        })
+        .collect();
+    // Where each chunk's entries of each offset begin: offset by offset, chunk by chunk.
     let mut start = vec![0usize; volume + 1];
-    for row in table.data.chunks_exact(volume) {
-        for (k, &i) in row.iter().enumerate() {
-            start[k + 1] += (i != NONE) as usize;
+    let mut firsts = vec![vec![0usize; volume]; counts.len()];
+    let mut next = 0;
+    for k in 0..volume {
+        start[k] = next;
+        for (first, count) in firsts.iter_mut().zip(&counts) {
+            first[k] = next;
+            next += count[k];
         }
     }
-    for k in 0..volume {
-        start[k + 1] += start[k];
-    }
-    let total = start[volume];
-    let (mut input, mut output) = (vec![0u32; total], vec![0u32; total]);
-    let mut next = start[..volume].to_vec();
-    for (o, row) in table.data.chunks_exact(volume).enumerate() {
-        for (k, &i) in row.iter().enumerate() {
-            if i != NONE {
-                input[next[k]] = i;
-                output[next[k]] = o as u32;
-                next[k] += 1;
+    start[volume] = next;
+    let (mut input, mut output) = (vec![0u32; next], vec![0u32; next]);
+    let (input_ptr, output_ptr) = (SyncPtr(input.as_mut_ptr()), SyncPtr(output.as_mut_ptr()));
+    let (input_ptr, output_ptr) = (&input_ptr, &output_ptr);
+    table.data.par_chunks(chunk_len.max(1)).zip(firsts).enumerate().for_each(|(chunk, (rows, mut at))| {
+        for (r, row) in rows.chunks_exact(volume).enumerate() {
+            for (k, &i) in row.iter().enumerate() {
+                if i != NONE {
+                    // SAFETY: `at[k]` runs over this chunk's own range of offset k's entries
+                    // (its counts, after the earlier chunks'), inside the arrays.
+                    unsafe {
+                        input_ptr.0.wrapping_add(at[k]).write(i);
+                        output_ptr.0.wrapping_add(at[k]).write((chunk * GROUP_ROWS + r) as u32);
+                    }
+                    at[k] += 1;
+                }
             }
         }
-    }
+    });
     OffsetPairs { start, input, output }
 }
 
@@ -431,6 +473,29 @@ mod tests {
             }
         }
         assert!(sub.num_pairs() > unique.len(), "the scene must have neighbours");
+    }
+    /// The parallel grouping over several chunks of rows gives each offset's pairs in row
+    /// order, as one serial pass over the table would.
+    #[test]
+    fn pairs_group_rows_in_order_across_chunks() {
+        let coords: Vec<Coord> = {
+            let mut c: Vec<Coord> = (0..30_000).map(|i: i32| [i % 2, (i * 7919) % 41 - 20, (i * 104_729) % 37 - 18, (i * 1_299_709) % 43 - 21]).collect();
+            c.sort();
+            c.dedup();
+            c
+        };
+        assert!(coords.len() > 2 * GROUP_ROWS, "the scene must span several chunks, has {} rows", coords.len());
+        let index = CoordIndex::build(&coords).unwrap();
+        let map = KernelMap::submanifold(&coords, &index, 3, 1);
+        let (table, volume) = (map.out_table(), map.volume());
+        let pairs = map.pairs();
+        for k in 0..volume {
+            let (input, output): (Vec<u32>, Vec<u32>) =
+                (0..table.rows()).filter_map(|o| Some((table.row(o)[k], o as u32)).filter(|(i, _)| *i != NONE)).unzip();
+            let range = pairs.start[k]..pairs.start[k + 1];
+            assert_eq!(&pairs.input[range.clone()], &input[..], "offset {k}: inputs");
+            assert_eq!(&pairs.output[range], &output[..], "offset {k}: outputs");
+        }
     }
 }
 
