@@ -1,17 +1,17 @@
 //! The three sparse convolutions: submanifold, strided down-sampling, transposed up-sampling.
 
+use std::sync::Arc;
+
 use burn::config::Config;
 use burn::module::{Module, Param};
 use burn::nn::Initializer;
-use std::sync::Arc;
-
 use burn::tensor::{Device, Tensor};
 
 use super::SparseBatchNorm;
+use crate::SparseTensor;
 use crate::batch_norm::Epilogue;
 use crate::kernel_map::KernelMap;
 use crate::op::sparse_conv;
-use crate::SparseTensor;
 
 /// `U(±bound)` for a `[K, C_in, C_out]` weight.
 fn uniform_weight(volume: usize, c_in: usize, c_out: usize, bound: f64, device: &Device) -> Param<Tensor<3>> {

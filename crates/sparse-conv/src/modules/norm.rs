@@ -7,11 +7,11 @@ use std::sync::Arc;
 
 use burn::tensor::{Device, Tensor};
 
+use crate::SparseTensor;
 use crate::batch_norm::{Epilogue, batch_norm_eval, batch_norm_train};
 use crate::conv_norm::sparse_conv_norm_eval;
 use crate::kernel_map::KernelMap;
 use crate::op::sparse_conv;
-use crate::SparseTensor;
 
 /// Configuration of a [`SparseBatchNorm`]; the defaults are PyTorch's `BatchNorm1d` (spec §1.6).
 #[derive(Config, Debug)]
