@@ -355,7 +355,7 @@ pub fn pair_conv(
     // once) the one pair of each row.
     let mut out = unsafe { assume_init(out) };
     if let Some(e) = epilogue {
-        out.par_chunks_mut(PAIR_CHUNK * c_dst).enumerate().for_each(|(chunk, rows)| e.apply(chunk * PAIR_CHUNK, rows));
+        e.apply_all(&mut out);
     }
     out
 }
@@ -535,7 +535,7 @@ mod tests {
                     let epilogue = ConvEpilogue::new(&stats, &gamma, &beta, 1e-5, relu, residual);
                     let run = |p: &OffsetPairs| pair_conv(&src, c_src, &w, c_dst, n_dst, direction, p, map.identity_offset(), Some(&epilogue));
                     let mut expected = blocked.clone();
-                    epilogue.apply(0, &mut expected);
+                    epilogue.apply_all(&mut expected);
                     assert!(run(pairs) == expected, "{what}: the blocks' epilogue differs from a pass after");
                     assert!(run(&reversed(pairs)) == expected, "{what}: the per-offset path's epilogue differs");
                 }

@@ -18,6 +18,7 @@ use burn_cubecl::CubeBackend;
 use crate::backend::{NormAfterConv, SparseConvBackend, cpu_forward};
 use crate::batch_norm::{BatchNormBackend, Epilogue};
 use crate::kernel_map::KernelMap;
+use crate::op::check_conv_inputs;
 
 /// A backend that runs a sparse convolution and the batch norm after it (fixed statistics) as
 /// one op. Shapes as [`SparseConvBackend::sparse_conv`]'s; `stats` is `[2, C_out]` (mean, biased
@@ -117,11 +118,7 @@ pub fn sparse_conv_norm_eval(
     epsilon: f64,
     epilogue: Epilogue,
 ) -> Tensor<2> {
-    let [rows, c_in] = features.dims();
-    let [volume, w_in, c_out] = weight.dims();
-    assert_eq!(rows, map.n_in(), "features have {rows} rows but the kernel map expects {}", map.n_in());
-    assert_eq!(volume, map.volume(), "weight has {volume} offsets but the kernel map has {}", map.volume());
-    assert_eq!(c_in, w_in, "features have {c_in} channels, the weight expects {w_in}");
+    let c_out = check_conv_inputs(&features, &weight, map);
     assert_eq!(gamma.dims()[0], c_out, "batch norm of {} channels after a conv of {c_out}", gamma.dims()[0]);
     let stats = Tensor::stack::<2>(vec![mean, var], 0).into_dispatch();
     let (x, w, map) = (features.into_dispatch(), weight.into_dispatch(), map.clone());

@@ -387,7 +387,7 @@ pub fn pair_conv<T: Element>(
         );
     }
     if let Some(e) = epilogue {
-        out.par_chunks_mut(CHUNK_ROWS * c_dst).enumerate().for_each(|(chunk, rows)| e.apply(chunk * CHUNK_ROWS, rows));
+        e.apply_all(&mut out);
     }
     out
 }

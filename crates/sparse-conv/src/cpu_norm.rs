@@ -165,6 +165,15 @@ impl<'a, T: Element> ConvEpilogue<'a, T> {
         self.a.len()
     }
 
+    /// Applies to a whole output, in parallel chunks of rows: for paths that finish every row
+    /// before any can take the epilogue.
+    pub fn apply_all(&self, out: &mut [T]) {
+        let c = self.channels();
+        if c > 0 {
+            out.par_chunks_mut(CHUNK_ROWS * c).enumerate().for_each(|(chunk, rows)| self.apply(chunk * CHUNK_ROWS, rows));
+        }
+    }
+
     /// Applies to whole rows, the first of which is output row `first`.
     pub fn apply(&self, first: usize, rows: &mut [T]) {
         let c = self.a.len();

@@ -13,14 +13,21 @@ use crate::kernel_map::KernelMap;
 /// `features` is `[map.n_in(), C_in]`, `weight` is `[map.volume(), C_in, C_out]`; the result is
 /// `[map.n_out(), C_out]` on the same device.
 pub fn sparse_conv(features: Tensor<2>, weight: Tensor<3>, map: &Arc<KernelMap>) -> Tensor<2> {
-    let [rows, c_in] = features.dims();
-    let [volume, w_in, _] = weight.dims();
-    assert_eq!(rows, map.n_in(), "features have {rows} rows but the kernel map expects {}", map.n_in());
-    assert_eq!(volume, map.volume(), "weight has {volume} offsets but the kernel map has {}", map.volume());
-    assert_eq!(c_in, w_in, "features have {c_in} channels, the weight expects {w_in}");
+    check_conv_inputs(&features, &weight, map);
     Tensor::from_dispatch(<Dispatch as SparseConvBackend>::sparse_conv(
         features.into_dispatch(),
         weight.into_dispatch(),
         map.clone(),
     ))
+}
+
+/// Panics, naming the mismatch, unless `features` and `weight` fit `map` and each other; returns
+/// the output channels.
+pub(crate) fn check_conv_inputs(features: &Tensor<2>, weight: &Tensor<3>, map: &KernelMap) -> usize {
+    let [rows, c_in] = features.dims();
+    let [volume, w_in, c_out] = weight.dims();
+    assert_eq!(rows, map.n_in(), "features have {rows} rows but the kernel map expects {}", map.n_in());
+    assert_eq!(volume, map.volume(), "weight has {volume} offsets but the kernel map has {}", map.volume());
+    assert_eq!(c_in, w_in, "features have {c_in} channels, the weight expects {w_in}");
+    c_out
 }
