@@ -1,13 +1,16 @@
 //! The sparse convolution as CubeCL kernels, for every cubecl runtime (wgpu/Vulkan, CUDA, ROCm).
 //!
-//! The same sums as [`crate::cpu`], arranged for a GPU:
-//! - forward and feature gradient are one output-stationary kernel over a [`NeighborTable`]: a
-//!   unit owns a vector of channels of 4 rows and sums each row's ≤ K partners in offset order, so no
-//!   atomics are needed (the software Vulkan driver has no f32 atomics) and results do not depend
-//!   on scheduling;
-//! - the weight gradient gives each block of `(offset, c_in, c_out)` (up to 4 × 16) a unit that walks that
-//!   offset's pairs (cut into a fixed number of slices whose partial sums are added afterwards),
-//!   so it too is deterministic.
+//! The same sums as [`crate::cpu`], arranged for a GPU as tiled products through shared memory:
+//! - forward and feature gradient are one output-stationary gather over a [`NeighborTable`]. A
+//!   cube owns a tile of rows (sorted by the offsets they use, [`RowTiles`]) and of output
+//!   channels, stages its rows' partners and each used offset's weight in shared memory, and each
+//!   unit sums its rows' partners in offset order. A layer with too few rows to fill the GPU with
+//!   tiles (the U-Net's coarse levels) runs the same sums untiled, one unit per few rows. No
+//!   atomics (the software Vulkan driver has no f32 atomics), and results do not depend on
+//!   scheduling;
+//! - the weight gradient gives each (offset, slice of its pairs, channel tile) a cube that stages
+//!   the pairs' rows of both sides in shared memory; the slices' partial sums are added
+//!   afterwards, in a fixed order, so it too is deterministic.
 //!
 //! Loads and multiply-adds are vectors of 4 floats where the channel counts allow (2 or 1
 //! otherwise).
@@ -31,19 +34,181 @@ use burn_cubecl::tensor::CubeTensor;
 use burn_cubecl::{CubeBackend, CubeDevice};
 
 use crate::kernel_map::{KernelMap, NeighborTable};
+use crate::row_tiles::RowTiles;
+use crate::timing::{Kernel, in_kernel};
 
-/// Units per cube of every launch here.
-const CUBE_UNITS: u32 = 256;
+/// Rows of a gather tile.
+const TILE_ROWS: usize = 64;
 
-/// Output rows one unit of the gather kernel computes.
-const ROWS_PER_UNIT: usize = 4;
+/// Fewest cubes the tiled gather takes on; a smaller layer runs [`direct_gather_kernel`].
+const TILED_MIN_CUBES: usize = 256;
+
+/// Rows one unit of the direct gather computes.
+const DIRECT_UNIT_ROWS: usize = 4;
+
+/// Rows of a tile one unit of the gather accumulates.
+const UNIT_ROWS: usize = 4;
+
+/// Most channel vectors a tile spans (output channels of the gather, either side of the weight
+/// gradient).
+const TILE_VECTORS: usize = 16;
+
+/// Most channel vectors of a tile one unit accumulates.
+const UNIT_VECTORS: usize = 1;
+
+/// Most reduced-channel vectors of the gather staged in shared memory per step.
+const STEP_VECTORS: usize = 4;
+
+/// Pairs of the weight gradient staged in shared memory per step.
+const STEP_PAIRS: usize = 16;
+
+/// Weight-gradient cubes to aim for (several per multiprocessor of a large GPU).
+const WEIGHT_GRAD_CUBES: usize = 2048;
 
 /// `out[o, c] = Σ_k Σ_r src[table[o, k], r] · w[k, r, c]`, with `w` laid out `[K, C_red, C_out]`
 /// (the forward's weight as is, the feature gradient's transposed). `table` entries `≥ n_src`
-/// mean "no partner". A unit owns `ROWS` consecutive rows and `N` consecutive channels: each
-/// weight vector it loads serves all its rows, each source vector `N` weight vectors.
+/// mean "no partner".
+///
+/// A cube owns a tile of `tile_rows` rows (taken in [`RowTiles`] order) by `tile_vectors` vectors
+/// of output channels. For each offset the tile's rows use, it stages their partners' features
+/// and the offset's weight, `step_vectors` reduced vectors at a time, in shared memory; each unit
+/// multiplies its `unit_rows` rows by its `unit_vectors` vector columns from there (a register
+/// tile: each staged value loaded serves several multiply-adds). Every output element is one
+/// unit's sum in offset order: no atomics, the same result on every run, whatever else is in the
+/// batch.
+// CubeCL kernels index their buffers; they have no slice iterators.
+#[allow(clippy::needless_range_loop)]
 #[cube(launch_unchecked)]
 fn gather_conv_kernel<F: Float, N: Size>(
+    src: &[Vector<F, N>],
+    weight: &[Vector<F, N>],
+    table: &[u32],
+    order: &[u32],
+    tile_start: &[u32],
+    tile_offsets: &[u32],
+    out: &mut [Vector<F, N>],
+    n_src: u32,
+    rows: usize,
+    c_red_vectors: usize,
+    c_out_vectors: usize,
+    volume: usize,
+    #[comptime] tile_rows: usize,
+    #[comptime] unit_rows: usize,
+    #[comptime] tile_vectors: usize,
+    #[comptime] unit_vectors: usize,
+    #[comptime] step_vectors: usize,
+) {
+    let tile = CUBE_POS_Y as usize;
+    let col = CUBE_POS_X as usize * tile_vectors;
+    let unit = UNIT_POS as usize;
+    let units = CUBE_DIM as usize;
+    let column_units = comptime!(tile_vectors / unit_vectors);
+    // A unit's columns are `tx + v·column_units`: neighbouring units read neighbouring vectors.
+    let tx = unit % column_units;
+    let ty = unit / column_units;
+    let zero = Vector::<F, N>::new(F::new(0.0));
+    let lanes = zero.vector_size();
+    let mut partners = Shared::<[u32]>::new_slice(tile_rows);
+    let mut a_tile = Shared::<[Vector<F, N>]>::new_slice(comptime!(tile_rows * step_vectors));
+    let mut b_tile = Shared::<[Vector<F, N>]>::new_slice(comptime!(step_vectors * lanes * tile_vectors));
+    let mut acc = Array::<Vector<F, N>>::new(comptime!(unit_rows * unit_vectors));
+    let mut a = Array::<Vector<F, N>>::new(unit_rows);
+    let mut b = Array::<Vector<F, N>>::new(unit_vectors);
+    #[unroll]
+    for j in 0..comptime!(unit_rows * unit_vectors) {
+        acc[j] = zero;
+    }
+    let c_red = c_red_vectors * lanes;
+    let first = tile_start[tile] as usize;
+    let last = tile_start[tile + 1] as usize;
+    for e in first..last {
+        let k = tile_offsets[e] as usize;
+        // After the last offset's reads of `partners` (its last step's second barrier), before
+        // this offset's (the barrier below).
+        let mut r = unit;
+        while r < tile_rows {
+            let t = tile * tile_rows + r;
+            let mut partner = n_src;
+            if t < rows {
+                partner = table[order[t] as usize * volume + k];
+            }
+            partners[r] = partner;
+            r += units;
+        }
+        sync_cube();
+        let w_base = k * c_red * c_out_vectors;
+        let mut c0 = 0;
+        while c0 < c_red_vectors {
+            let mut i = unit;
+            while i < tile_rows * step_vectors {
+                let partner = partners[i / step_vectors];
+                let cv = c0 + i % step_vectors;
+                let mut v = zero;
+                if partner < n_src && cv < c_red_vectors {
+                    v = src[partner as usize * c_red_vectors + cv];
+                }
+                a_tile[i] = v;
+                i += units;
+            }
+            let mut i = unit;
+            while i < step_vectors * lanes * tile_vectors {
+                let r = c0 * lanes + i / tile_vectors;
+                let c = col + i % tile_vectors;
+                let mut v = zero;
+                if r < c_red && c < c_out_vectors {
+                    v = weight[w_base + r * c_out_vectors + c];
+                }
+                b_tile[i] = v;
+                i += units;
+            }
+            sync_cube();
+            #[unroll]
+            for cv in 0..step_vectors {
+                #[unroll]
+                for j in 0..unit_rows {
+                    a[j] = a_tile[(ty * unit_rows + j) * step_vectors + cv];
+                }
+                #[unroll]
+                for lane in 0..lanes {
+                    #[unroll]
+                    for v in 0..unit_vectors {
+                        b[v] = b_tile[(cv * lanes + lane) * tile_vectors + tx + v * column_units];
+                    }
+                    #[unroll]
+                    for j in 0..unit_rows {
+                        let x = Vector::new(a[j].extract(lane));
+                        #[unroll]
+                        for v in 0..unit_vectors {
+                            acc[j * unit_vectors + v] += x * b[v];
+                        }
+                    }
+                }
+            }
+            c0 += step_vectors;
+            sync_cube();
+        }
+    }
+    #[unroll]
+    for v in 0..unit_vectors {
+        let c = col + tx + v * column_units;
+        if c < c_out_vectors {
+            #[unroll]
+            for j in 0..unit_rows {
+                let t = tile * tile_rows + ty * unit_rows + j;
+                if t < rows {
+                    out[order[t] as usize * c_out_vectors + c] = acc[j * unit_vectors + v];
+                }
+            }
+        }
+    }
+}
+
+/// [`gather_conv_kernel`]'s sums without tiles, for layers too small to fill a GPU with tiles (the
+/// U-Net's coarse levels): a unit owns `rows_per_unit` consecutive rows and one channel vector
+/// and walks their partners straight from device memory, so the launch has many more units and
+/// no barriers. Each output element is the same sum in the same order as in the tiled kernel.
+#[cube(launch_unchecked)]
+fn direct_gather_kernel<F: Float, N: Size>(
     src: &[Vector<F, N>],
     weight: &[Vector<F, N>],
     table: &[u32],
@@ -113,9 +278,12 @@ fn gather_conv_kernel<F: Float, N: Size>(
     }
 }
 
-/// `partial[s, k, i, o] = Σ_{p ∈ slice s of offset k} x[input[p], i] · g[output[p], o]`. A unit
-/// owns an `N × (OUT·N)` block (`N` input channels by `OUT` vectors of output channels), so each
-/// pair's two row indices and input vector serve `OUT·N²` multiply-adds.
+/// `partial[s, k, i, o] = Σ_{p ∈ slice s of offset k} x[input[p], i] · g[output[p], o]`.
+///
+/// A cube owns one slice of one offset's pairs and a tile of `in_vectors` input-channel vectors
+/// by `out_vectors` output-channel vectors; it stages `step_pairs` pairs' rows of both sides in
+/// shared memory, and each unit accumulates `unit_in` input vectors (`N` rows each) by
+/// `unit_out` output vectors of the tile.
 #[cube(launch_unchecked)]
 fn weight_grad_kernel<F: Float, N: Size>(
     x: &[Vector<F, N>],
@@ -128,58 +296,148 @@ fn weight_grad_kernel<F: Float, N: Size>(
     c_out_vectors: usize,
     volume: usize,
     slices: usize,
-    #[comptime] out_per_unit: usize,
+    #[comptime] in_vectors: usize,
+    #[comptime] out_vectors: usize,
+    #[comptime] unit_in: usize,
+    #[comptime] unit_out: usize,
+    #[comptime] step_pairs: usize,
 ) {
-    let pos = ABSOLUTE_POS;
-    let out_blocks = c_out_vectors / out_per_unit;
-    if pos >= slices * volume * c_in_vectors * out_blocks {
-        terminate!();
-    }
-    let o = (pos % out_blocks) * out_per_unit;
-    let rest = pos / out_blocks;
-    let i = rest % c_in_vectors;
-    let rest = rest / c_in_vectors;
-    let k = rest % volume;
-    let slice = rest / volume;
+    let o0 = CUBE_POS_X as usize * out_vectors;
+    let i0 = CUBE_POS_Y as usize * in_vectors;
+    let k = CUBE_POS_Z as usize / slices;
+    let slice = CUBE_POS_Z as usize % slices;
+    let unit = UNIT_POS as usize;
+    let units = CUBE_DIM as usize;
+    let out_units = comptime!(out_vectors / unit_out);
+    let in_units = comptime!(in_vectors / unit_in);
+    // A unit's vectors are `tx + v·out_units` and `ty + u·in_units`.
+    let tx = unit % out_units;
+    let ty = unit / out_units;
     let begin = start[k] as usize;
     let len = start[k + 1] as usize - begin;
     let from = begin + len * slice / slices;
     let to = begin + len * (slice + 1) / slices;
     let zero = Vector::<F, N>::new(F::new(0.0));
     let lanes = zero.vector_size();
-    let acc_len = comptime!(lanes * out_per_unit);
+    let mut x_tile = Shared::<[Vector<F, N>]>::new_slice(comptime!(step_pairs * in_vectors));
+    let mut g_tile = Shared::<[Vector<F, N>]>::new_slice(comptime!(step_pairs * out_vectors));
+    let acc_len = comptime!(unit_in * lanes * unit_out);
     let mut acc = Array::<Vector<F, N>>::new(acc_len);
+    let mut xs = Array::<Vector<F, N>>::new(unit_in);
+    let mut gs = Array::<Vector<F, N>>::new(unit_out);
     #[unroll]
     for a in 0..acc_len {
         acc[a] = zero;
     }
-    for p in from..to {
-        let xs = x[input[p] as usize * c_in_vectors + i];
-        let g_row = output[p] as usize * c_out_vectors + o;
+    let mut p0 = from;
+    while p0 < to {
+        let mut i = unit;
+        while i < step_pairs * in_vectors {
+            let p = p0 + i / in_vectors;
+            let c = i0 + i % in_vectors;
+            let mut v = zero;
+            if p < to && c < c_in_vectors {
+                v = x[input[p] as usize * c_in_vectors + c];
+            }
+            x_tile[i] = v;
+            i += units;
+        }
+        let mut i = unit;
+        while i < step_pairs * out_vectors {
+            let p = p0 + i / out_vectors;
+            let c = o0 + i % out_vectors;
+            let mut v = zero;
+            if p < to && c < c_out_vectors {
+                v = g[output[p] as usize * c_out_vectors + c];
+            }
+            g_tile[i] = v;
+            i += units;
+        }
+        sync_cube();
         #[unroll]
-        for q in 0..out_per_unit {
-            let gs = g[g_row + q];
+        for q in 0..step_pairs {
             #[unroll]
-            for lane in 0..lanes {
-                acc[lane * out_per_unit + q] += Vector::new(xs.extract(lane)) * gs;
+            for u in 0..unit_in {
+                xs[u] = x_tile[q * in_vectors + ty + u * in_units];
+            }
+            #[unroll]
+            for v in 0..unit_out {
+                gs[v] = g_tile[q * out_vectors + tx + v * out_units];
+            }
+            #[unroll]
+            for u in 0..unit_in {
+                #[unroll]
+                for lane in 0..lanes {
+                    let xv = Vector::new(xs[u].extract(lane));
+                    #[unroll]
+                    for v in 0..unit_out {
+                        acc[(u * lanes + lane) * unit_out + v] += xv * gs[v];
+                    }
+                }
+            }
+        }
+        sync_cube();
+        p0 += step_pairs;
+    }
+    #[unroll]
+    for u in 0..unit_in {
+        let ci = i0 + ty + u * in_units;
+        #[unroll]
+        for v in 0..unit_out {
+            let co = o0 + tx + v * out_units;
+            if ci < c_in_vectors && co < c_out_vectors {
+                let base = ((slice * volume + k) * c_in_vectors + ci) * lanes;
+                #[unroll]
+                for lane in 0..lanes {
+                    partial[(base + lane) * c_out_vectors + co] = acc[(u * lanes + lane) * unit_out + v];
+                }
             }
         }
     }
-    let base = ((slice * volume + k) * c_in_vectors + i) * lanes;
-    #[unroll]
-    for lane in 0..lanes {
-        #[unroll]
-        for q in 0..out_per_unit {
-            partial[(base + lane) * c_out_vectors + o + q] = acc[lane * out_per_unit + q];
-        }
+}
+
+/// `out[i] = Σ_s partial[s, i]`, slices added in order (the weight gradient's last step, kept out
+/// of Burn's autotuned reduction so the op's cost and sums are its own).
+#[cube(launch_unchecked)]
+fn sum_slices_kernel<F: Float, N: Size>(partial: &[Vector<F, N>], out: &mut [Vector<F, N>], len: usize, slices: usize) {
+    let i = ABSOLUTE_POS;
+    if i >= len {
+        terminate!();
     }
+    let mut sum = partial[i];
+    for s in 1..slices {
+        sum += partial[s * len + i];
+    }
+    out[i] = sum;
+}
+
+/// One side's gather table on a device.
+struct GatherTables {
+    table: Handle,
+    /// The rows' tile plan, made the first time the tiled kernel runs on this side.
+    tiles: OnceLock<TilePlan>,
+}
+
+impl GatherTables {
+    fn upload(client: &Client, table: &NeighborTable) -> Self {
+        Self { table: upload_u32(client, table.as_slice()), tiles: OnceLock::new() }
+    }
+}
+
+/// [`RowTiles`] on a device.
+struct TilePlan {
+    order: Handle,
+    start: Handle,
+    offsets: Handle,
+    tiles: usize,
 }
 
 /// A map's tables on one device, each uploaded the first time a kernel needs it.
 struct DeviceTables {
     device: CubeDevice,
-    out_table: OnceLock<Handle>,
-    in_table: OnceLock<Handle>,
+    /// The forward's gather (rows: outputs) and the feature gradient's (rows: inputs).
+    forward: OnceLock<GatherTables>,
+    backward: OnceLock<GatherTables>,
     /// `start`, `input`, `output` of [`crate::kernel_map::OffsetPairs`].
     pairs: OnceLock<[Handle; 3]>,
 }
@@ -187,16 +445,19 @@ struct DeviceTables {
 fn tables(map: &KernelMap, device: &CubeDevice) -> Arc<DeviceTables> {
     map.attachment(
         |t: &DeviceTables| &t.device == device,
-        || DeviceTables { device: device.clone(), out_table: OnceLock::new(), in_table: OnceLock::new(), pairs: OnceLock::new() },
+        || DeviceTables { device: device.clone(), forward: OnceLock::new(), backward: OnceLock::new(), pairs: OnceLock::new() },
     )
 }
 
 fn upload_u32(client: &Client, values: &[u32]) -> Handle {
-    client.create_from_slice(u32::as_bytes(values))
+    // wgpu cannot bind an empty buffer.
+    client.create_from_slice(u32::as_bytes(if values.is_empty() { &[0] } else { values }))
 }
 
-fn upload_table(client: &Client, table: &NeighborTable) -> Handle {
-    upload_u32(client, table.as_slice())
+fn upload_tiles(client: &Client, table: &NeighborTable, n_src: usize) -> TilePlan {
+    // Host work of the map's preparation, counted with the map build.
+    let tiles = in_kernel(Kernel::MapBuild, || RowTiles::new(table, n_src, TILE_ROWS));
+    TilePlan { order: upload_u32(client, &tiles.order), start: upload_u32(client, &tiles.start), offsets: upload_u32(client, &tiles.offsets), tiles: tiles.tiles() }
 }
 
 fn empty_f32(like: &CubeTensor, shape: Shape) -> CubeTensor {
@@ -212,15 +473,15 @@ fn contiguous(t: CubeTensor) -> CubeTensor {
     if t.is_contiguous() { t } else { into_contiguous(t) }
 }
 
-fn units(client: &Client, count: usize) -> (CubeCount, CubeDim) {
-    let dim = CubeDim::new_1d(CUBE_UNITS);
-    (calculate_cube_count_elemwise(client, count, dim), dim)
-}
-
-/// The widest of 4, 2 or 1 that divides every count: the vector width for channel counts, and the
-/// output vectors a weight-gradient unit takes on.
+/// The widest of 4, 2 or 1 that divides every count: the vector width for channel counts.
 fn widest_block(counts: &[usize]) -> usize {
     [4, 2, 1].into_iter().find(|v| counts.iter().all(|c| c % v == 0)).unwrap_or(1)
+}
+
+/// The vectors a tile spans across `vectors` channel vectors: a power of two up to
+/// [`TILE_VECTORS`], so narrow layers do not idle most of a cube.
+fn tile_vectors(vectors: usize) -> usize {
+    vectors.next_power_of_two().clamp(1, TILE_VECTORS)
 }
 
 /// The whole buffer of a contiguous tensor, as vectors of `vector` floats.
@@ -228,10 +489,11 @@ fn vectors(t: &CubeTensor, vector: usize) -> BufferArg {
     unsafe { BufferArg::from_raw_parts(t.handle.clone(), t.meta.num_elements() / vector) }
 }
 
-/// `out[o] = Σ_k src[table[o, k]] · w_k` for `w` laid out `[K, C_red, C_out]`.
-fn gather_conv(src: CubeTensor, weight: CubeTensor, table: &Handle, rows: usize, volume: usize) -> CubeTensor {
+/// `out[o] = Σ_k src[table[o, k]] · w_k` for `w` laid out `[K, C_red, C_out]`, over the rows of
+/// `table` (whose device copy is `gather`).
+fn gather_conv(src: CubeTensor, weight: CubeTensor, gather: &GatherTables, table: &NeighborTable) -> CubeTensor {
     let [_, c_red, c_out] = weight.meta.shape().dims();
-    let n_src = src.meta.shape()[0];
+    let (n_src, rows, volume) = (src.meta.shape()[0], table.rows(), table.volume());
     if rows * c_out == 0 || n_src * c_red == 0 {
         // Nothing to gather (and wgpu cannot bind an empty buffer).
         return zeros(&src, Shape::new([rows, c_out]));
@@ -239,9 +501,42 @@ fn gather_conv(src: CubeTensor, weight: CubeTensor, table: &Handle, rows: usize,
     let vector = widest_block(&[c_red, c_out]);
     let out = empty_f32(&src, Shape::new([rows, c_out]));
     let client = src.client.clone();
-    let (count, dim) = units(&client, rows.div_ceil(ROWS_PER_UNIT) * c_out / vector);
-    // Safety: every index the kernel forms is in bounds: rows and channels by the guard on
-    // `pos`, partners by `partner < n_src`, weights by the shapes checked by the callers.
+    let tile_vectors = tile_vectors(c_out / vector);
+    let col_tiles = (c_out / vector).div_ceil(tile_vectors);
+    let tiles = rows.div_ceil(TILE_ROWS);
+    if tiles * col_tiles < TILED_MIN_CUBES {
+        let dim = CubeDim::new_1d(256);
+        let count = calculate_cube_count_elemwise(&client, rows.div_ceil(DIRECT_UNIT_ROWS) * c_out / vector, dim);
+        // Safety: rows and channels are bounded by the guard on the unit's position, partners by
+        // `partner < n_src`, weights by the shapes checked by the callers.
+        unsafe {
+            direct_gather_kernel::launch_unchecked::<f32>(
+                &client,
+                count,
+                dim,
+                vector,
+                vectors(&src, vector),
+                vectors(&weight, vector),
+                BufferArg::from_raw_parts(gather.table.clone(), rows * volume),
+                vectors(&out, vector),
+                n_src as u32,
+                rows,
+                c_red / vector,
+                c_out / vector,
+                volume,
+                DIRECT_UNIT_ROWS,
+            );
+        }
+        return out;
+    }
+    let plan = gather.tiles.get_or_init(|| upload_tiles(&client, table, n_src));
+    let unit_vectors = UNIT_VECTORS.min(tile_vectors);
+    let step_vectors = (c_red / vector).next_power_of_two().min(STEP_VECTORS);
+    let count = CubeCount::Static(col_tiles as u32, plan.tiles as u32, 1);
+    let dim = CubeDim::new_1d((tile_vectors / unit_vectors * TILE_ROWS / UNIT_ROWS) as u32);
+    // Safety: every index the kernel forms is in bounds: rows by `t < rows`, channels by the
+    // column and reduced-vector guards, partners by `partner < n_src`, the tile plan by its
+    // construction from this table.
     unsafe {
         gather_conv_kernel::launch_unchecked::<f32>(
             &client,
@@ -250,14 +545,21 @@ fn gather_conv(src: CubeTensor, weight: CubeTensor, table: &Handle, rows: usize,
             vector,
             vectors(&src, vector),
             vectors(&weight, vector),
-            BufferArg::from_raw_parts(table.clone(), rows * volume),
+            BufferArg::from_raw_parts(gather.table.clone(), rows * volume),
+            BufferArg::from_raw_parts(plan.order.clone(), rows),
+            BufferArg::from_raw_parts(plan.start.clone(), plan.tiles + 1),
+            BufferArg::from_raw_parts(plan.offsets.clone(), plan.tiles * volume),
             vectors(&out, vector),
             n_src as u32,
             rows,
             c_red / vector,
             c_out / vector,
             volume,
-            ROWS_PER_UNIT,
+            TILE_ROWS,
+            UNIT_ROWS,
+            tile_vectors,
+            unit_vectors,
+            step_vectors,
         );
     }
     out
@@ -267,8 +569,8 @@ fn gather_conv(src: CubeTensor, weight: CubeTensor, table: &Handle, rows: usize,
 pub(crate) fn forward(features: CubeTensor, weight: CubeTensor, map: &KernelMap) -> CubeTensor {
     let (features, weight) = (contiguous(features), contiguous(weight));
     let tables = tables(map, &features.device);
-    let table = tables.out_table.get_or_init(|| upload_table(&features.client, map.out_table()));
-    gather_conv(features, weight, table, map.n_out(), map.volume())
+    let gather = tables.forward.get_or_init(|| GatherTables::upload(&features.client, map.out_table()));
+    gather_conv(features, weight, gather, map.out_table())
 }
 
 /// Feature gradient on a cube device (f32): the forward's gather over the transposed map, with
@@ -277,8 +579,19 @@ pub(crate) fn input_grad(grad_out: CubeTensor, weight: CubeTensor, map: &KernelM
     let grad_out = contiguous(grad_out);
     let weight_t = into_contiguous(CubeBackend::float_swap_dims(weight, 1, 2));
     let tables = tables(map, &grad_out.device);
-    let table = tables.in_table.get_or_init(|| upload_table(&grad_out.client, map.in_table()));
-    gather_conv(grad_out, weight_t, table, map.n_in(), map.volume())
+    let gather = tables.backward.get_or_init(|| GatherTables::upload(&grad_out.client, map.in_table()));
+    gather_conv(grad_out, weight_t, gather, map.in_table())
+}
+
+/// `out = Σ_s partial[s]` for a contiguous `partial` of `slices` blocks of `out`'s size.
+fn sum_slices(partial: &CubeTensor, out: &CubeTensor, slices: usize, vector: usize) {
+    let len = out.meta.num_elements() / vector;
+    let dim = CubeDim::new_1d(256);
+    let count = CubeCount::Static(len.div_ceil(256) as u32, 1, 1);
+    // Safety: the kernel reads `slices · len` and writes `len` vectors, the buffers' sizes.
+    unsafe {
+        sum_slices_kernel::launch_unchecked::<f32>(&partial.client, count, dim, vector, vectors(partial, vector), vectors(out, vector), len, slices);
+    }
 }
 
 /// Weight gradient on a cube device (f32), `[K, C_in, C_out]`.
@@ -297,14 +610,18 @@ pub(crate) fn weight_grad(features: CubeTensor, grad_out: CubeTensor, map: &Kern
         [upload_u32(&client, &start), upload_u32(&client, &pairs.input), upload_u32(&client, &pairs.output)]
     });
     let vector = widest_block(&[c_in, c_out]);
-    let out_per_unit = widest_block(&[c_out / vector]);
-    // Enough units to fill a GPU (2^16), never slices shorter than a few dozen pairs. The slice
-    // count depends on the problem only, so the sums' order does too.
-    let units_per_slice = volume * c_in * c_out / (vector * vector * out_per_unit);
-    let slices = (1usize << 16).div_ceil(units_per_slice).clamp(1, (num_pairs / (32 * volume)).max(1));
+    let (in_vectors, out_vectors) = (tile_vectors(c_in / vector), tile_vectors(c_out / vector));
+    let (in_tiles, out_tiles) = ((c_in / vector).div_ceil(in_vectors), (c_out / vector).div_ceil(out_vectors));
+    // Enough cubes to fill a large GPU, never slices shorter than a few steps. The slice count
+    // depends on the problem only, so the sums' order does too.
+    let cubes_per_slice = volume * in_tiles * out_tiles;
+    let slices = WEIGHT_GRAD_CUBES.div_ceil(cubes_per_slice).clamp(1, (num_pairs / (4 * STEP_PAIRS * volume)).max(1));
     let partial = empty_f32(&features, Shape::new([slices, volume, c_in, c_out]));
-    let (count, dim) = units(&client, slices * units_per_slice);
-    // Safety: units past the last block return; pair rows are rows of `features` and `grad_out`.
+    let count = CubeCount::Static(out_tiles as u32, in_tiles as u32, (volume * slices) as u32);
+    let (unit_in, unit_out) = (UNIT_VECTORS.min(in_vectors), UNIT_VECTORS.min(out_vectors));
+    let dim = CubeDim::new_1d((in_vectors / unit_in * out_vectors / unit_out) as u32);
+    // Safety: pair rows are rows of `features` and `grad_out`; channels are guarded; every
+    // element of `partial` is written by the cube of its slice, offset and tile.
     unsafe {
         weight_grad_kernel::launch_unchecked::<f32>(
             &client,
@@ -321,11 +638,20 @@ pub(crate) fn weight_grad(features: CubeTensor, grad_out: CubeTensor, map: &Kern
             c_out / vector,
             volume,
             slices,
-            out_per_unit,
+            in_vectors,
+            out_vectors,
+            unit_in,
+            unit_out,
+            STEP_PAIRS,
         );
     }
-    let summed = if slices == 1 { partial } else { CubeBackend::float_sum_dim(partial, 0) };
-    CubeBackend::float_reshape(summed, Shape::new([volume, c_in, c_out]))
+    let shape = Shape::new([volume, c_in, c_out]);
+    if slices == 1 {
+        return CubeBackend::float_reshape(partial, shape);
+    }
+    let summed = empty_f32(&features, shape);
+    sum_slices(&partial, &summed, slices, vector);
+    summed
 }
 
 /// Whether the kernels here handle tensors of this dtype.

@@ -35,6 +35,7 @@ pub mod kernel_map;
 pub mod modules;
 pub mod op;
 pub mod output_grad;
+mod row_tiles;
 pub mod scene;
 pub mod tensor;
 pub mod timing;

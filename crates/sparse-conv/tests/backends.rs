@@ -41,15 +41,22 @@ fn flex_ndarray_and_wgpu_agree() {
         devices.push(("wgpu", wgpu));
     }
     eprintln!("comparing flex with: {:?}", devices[1..].iter().map(|(n, _)| *n).collect::<Vec<_>>());
-    for (name, map) in [("submanifold", &subm), ("down", &down), ("up", &up)] {
-        let c = [8, 16];
+    // A dense scene: enough pairs per offset that the GPU weight gradient sums several slices,
+    // and (at 136 output channels, three column tiles) enough tiles that the GPU gather runs its
+    // tiled kernel, the forward in one case and the feature gradient in the other.
+    let dense_coords = random_coords(&mut r, 6000, 1, 12, 1);
+    let dense = Arc::new(KernelMap::submanifold(&dense_coords, &CoordIndex::build(&dense_coords).unwrap(), 3, 1));
+    // Channel counts: one GPU tile; several column tiles of both weight sides with partial last
+    // ones (72 and 136 are 18 and 34 vectors of 4); vectors of 2.
+    let cases = [("submanifold", &subm, [8, 16]), ("down", &down, [8, 16]), ("up", &up, [8, 16]), ("submanifold", &subm, [72, 136]), ("up", &up, [136, 72]), ("submanifold", &subm, [6, 10]), ("dense submanifold", &dense, [8, 16]), ("dense submanifold", &dense, [72, 136]), ("dense submanifold", &dense, [136, 72])];
+    for (name, map, c) in cases {
         let x = random_values(&mut r, map.n_in() * c[0]);
         let w = random_values(&mut r, map.volume() * c[0] * c[1]);
         let g = random_values(&mut r, map.n_out() * c[1]);
         let reference = run(map, &x, &w, &g, c, &devices[0].1);
         for (device_name, device) in &devices[1..] {
             let other = run(map, &x, &w, &g, c, device);
-            let what = format!("{name} on {device_name} vs flex");
+            let what = format!("{name} {c:?} on {device_name} vs flex");
             assert_close(&other.out, &reference.out, 1e-5, &format!("{what}: output"));
             assert_close(&other.gx, &reference.gx, 1e-5, &format!("{what}: feature gradient"));
             assert_close(&other.gw, &reference.gw, 1e-5, &format!("{what}: weight gradient"));

@@ -52,6 +52,13 @@ struct Args {
     /// the first channel count's times grow with the pairs.
     #[arg(long, value_delimiter = ',', default_value = "1")]
     scale: Vec<usize>,
+    /// GPU backends: calls queued back to back before each sync, so the device's time per call is
+    /// measured with the host's launch cost overlapped (as a training loop runs); 1 = sync each call.
+    #[arg(long, default_value_t = 20)]
+    queue: usize,
+    /// GPU backends: the size of the square f32 matmul timed as the device's reference figure.
+    #[arg(long, default_value_t = 4096)]
+    matmul_size: usize,
     /// Print one JSON object instead of the table.
     #[arg(long)]
     json: bool,
@@ -130,6 +137,10 @@ struct Report {
     map_ms: f64,
     /// The CPU kernels' GEMM at this thread count; none on wgpu, whose kernels do not use it.
     sgemm: Option<GemmCeiling>,
+    /// On wgpu, Burn's own f32 matmul on the device: the GPU figure the op is set against.
+    device_matmul: Option<GemmCeiling>,
+    /// Calls per sync in the timings (1 on the CPU backends).
+    queue: usize,
     results: Vec<Row>,
     strided: Vec<Strided>,
     scaling: Vec<ScalePoint>,
@@ -193,9 +204,11 @@ fn measure(args: &Args, scene_coords: &[sparse_conv::Coord]) -> anyhow::Result<R
 
     let cpu = matches!(args.backend, Backend::Flex | Backend::Ndarray);
     let sgemm = cpu.then(|| gemm_ceiling(2048, args.warmup, args.runs.min(5)));
+    let queue = if cpu { 1 } else { args.queue.max(1) };
+    let device_matmul = (!cpu).then(|| device_matmul(&device, args.matmul_size, args.warmup, args.runs.min(5), queue));
     let mut results = Vec::new();
     for &c in &args.channels {
-        let (fwd, fwd_bwd) = time_op(&device, &map, c, args.warmup, args.runs);
+        let (fwd, fwd_bwd) = time_op(&device, &map, c, args.warmup, args.runs, queue);
         let (fwd_ms, fwd_bwd_ms) = (fwd.median_ms, fwd_bwd.median_ms);
         let flop = 2.0 * pairs as f64 * c as f64 * c as f64;
         let kernel = cpu.then(|| kernel_times(&map, c, args.warmup, args.runs, fwd_ms, fwd_bwd_ms));
@@ -252,7 +265,7 @@ fn measure(args: &Args, scene_coords: &[sparse_conv::Coord]) -> anyhow::Result<R
             let coords = scene::tile_as_batch(scene_coords, scale);
             let index = CoordIndex::build(&coords)?;
             let map = Arc::new(KernelMap::submanifold(&coords, &index, args.kernel, 1));
-            let (fwd, fwd_bwd) = time_op(&device, &map, c, args.warmup, args.runs);
+            let (fwd, fwd_bwd) = time_op(&device, &map, c, args.warmup, args.runs, queue);
             let (fwd_ms, fwd_bwd_ms) = (fwd.median_ms, fwd_bwd.median_ms);
             let pairs = map.num_pairs();
             scaling.push(ScalePoint { scale, voxels: coords.len(), pairs, fwd_ms, fwd_bwd_ms, fwd_bwd_ms_per_mpair: fwd_bwd_ms / (pairs as f64 / 1e6) });
@@ -267,6 +280,8 @@ fn measure(args: &Args, scene_coords: &[sparse_conv::Coord]) -> anyhow::Result<R
         runs: args.runs,
         map_ms,
         sgemm,
+        device_matmul,
+        queue,
         results,
         strided,
         scaling,
@@ -276,29 +291,51 @@ fn measure(args: &Args, scene_coords: &[sparse_conv::Coord]) -> anyhow::Result<R
 }
 
 /// Forward and forward+backward of the op through Burn, the backward from a given output
-/// gradient (as the peer times it: `out.backward(grad)`, no loss).
-fn time_op(device: &Device, map: &Arc<KernelMap>, c: usize, warmup: usize, runs: usize) -> (Timing, Timing) {
+/// gradient (as the peer times it: `out.backward(grad)`, no loss). Each timed run is `queue`
+/// calls and one sync, and reports the time per call.
+fn time_op(device: &Device, map: &Arc<KernelMap>, c: usize, warmup: usize, runs: usize, queue: usize) -> (Timing, Timing) {
     let (n, volume) = (map.n_in(), map.volume());
     let x = Tensor::<2>::random([n, c], Distribution::Uniform(-1.0, 1.0), device);
     let w = Tensor::<3>::random([volume, c, c], Distribution::Uniform(-0.1, 0.1), device);
-    let fwd = time_ms(warmup, runs, || {
-        let out = sparse_conv(x.clone(), w.clone(), map);
+    let fwd = per_call(time_ms(warmup, runs, || {
+        for _ in 0..queue {
+            std::hint::black_box(sparse_conv(x.clone(), w.clone(), map));
+        }
         device.sync().expect("device sync");
-        std::hint::black_box(out);
-    });
+    }), queue);
     let ad = device.clone().autodiff();
     let xa = Tensor::<2>::random([n, c], Distribution::Uniform(-1.0, 1.0), &ad).require_grad();
     let wa = Tensor::<3>::random([volume, c, c], Distribution::Uniform(-0.1, 0.1), &ad).require_grad();
     let grad = Tensor::<2>::random([map.n_out(), c], Distribution::Uniform(-1.0, 1.0), &ad);
-    let fwd_bwd = time_ms(warmup, runs, || {
-        let out = sparse_conv(xa.clone(), wa.clone(), map);
-        let grads = backward_from(out, grad.clone());
-        let gx = xa.grad(&grads).expect("feature gradient");
-        let gw = wa.grad(&grads).expect("weight gradient");
+    let fwd_bwd = per_call(time_ms(warmup, runs, || {
+        for _ in 0..queue {
+            let out = sparse_conv(xa.clone(), wa.clone(), map);
+            let grads = backward_from(out, grad.clone());
+            let gx = xa.grad(&grads).expect("feature gradient");
+            let gw = wa.grad(&grads).expect("weight gradient");
+            std::hint::black_box((gx, gw));
+        }
         ad.sync().expect("device sync");
-        std::hint::black_box((gx, gw));
-    });
+    }), queue);
     (fwd, fwd_bwd)
+}
+
+/// A timing of `queue` calls as the time of one.
+fn per_call(t: Timing, queue: usize) -> Timing {
+    Timing { median_ms: t.median_ms / queue as f64, min_ms: t.min_ms / queue as f64 }
+}
+
+/// Burn's f32 matmul of two `size × size` matrices on the device, `queue` per sync.
+fn device_matmul(device: &Device, size: usize, warmup: usize, runs: usize, queue: usize) -> GemmCeiling {
+    let a = Tensor::<2>::random([size, size], Distribution::Uniform(-1.0, 1.0), device);
+    let b = Tensor::<2>::random([size, size], Distribution::Uniform(-1.0, 1.0), device);
+    let ms = per_call(time_ms(warmup, runs, || {
+        for _ in 0..queue {
+            std::hint::black_box(a.clone().matmul(b.clone()));
+        }
+        device.sync().expect("device sync");
+    }), queue).median_ms;
+    GemmCeiling { size, ms, gflops: 2.0 * (size as f64).powi(3) / ms / 1e6 }
 }
 
 /// The three slice kernels timed on plain vectors, and the op's time around them.
@@ -369,8 +406,12 @@ fn print_table(r: &Report) {
     if let Some(sgemm) = &r.sgemm {
         println!("SGEMM ceiling ({0}×{0}×{0}, the kernels' GEMM): {1:.1} GFLOP/s", sgemm.size, sgemm.gflops);
     }
+    if let Some(m) = &r.device_matmul {
+        println!("device f32 matmul ({0}×{0}×{0}, Burn's): {1:.1} GFLOP/s, {2:.3} ms; {3} calls per sync in every figure", m.size, m.gflops, m.ms, r.queue);
+    }
     // The share of that ceiling the op reaches (the issue asks for half at C ≥ 64).
-    let share = |gflops: f64| r.sgemm.as_ref().map_or_else(|| "—".to_string(), |s| format!("{:.0} %", 100.0 * gflops / s.gflops));
+    let ceiling = r.sgemm.as_ref().or(r.device_matmul.as_ref());
+    let share = |gflops: f64| ceiling.map_or_else(|| "—".to_string(), |s| format!("{:.0} %", 100.0 * gflops / s.gflops));
     println!(
         "{:>6} {:>6} {:>10} {:>9} {:>10} {:>7} {:>14} {:>9} {:>10} {:>7}",
         "C_in", "C_out", "fwd ms", "(min)", "GFLOP/s", "ceil.", "fwd+bwd ms", "(min)", "GFLOP/s", "ceil."
