@@ -4,8 +4,9 @@
 //! - forward and feature gradient are one output-stationary gather over a [`NeighborTable`]. A
 //!   cube owns a tile of rows (sorted by the offsets they use, [`RowTiles`]) and of output
 //!   channels, stages its rows' partners and each used offset's weight in shared memory, and each
-//!   unit sums its rows' partners in offset order. A layer with too few rows to fill the GPU with
-//!   tiles (the U-Net's coarse levels) runs the same sums untiled, one unit per few rows. No
+//!   unit sums its rows' partners in offset order. A launch of fewer tiles than
+//!   `PMUNET_GPU_TILED_MIN_CUBES` (default 2048) runs the same sums untiled, one unit per few rows,
+//!   without the tile plan's host work. No
 //!   atomics (the software Vulkan driver has no f32 atomics), and results do not depend on
 //!   scheduling;
 //! - the weight gradient gives each (offset, slice of its pairs, channel tile) a cube that stages
@@ -40,8 +41,20 @@ use crate::timing::{Kernel, in_kernel};
 /// Rows of a gather tile.
 const TILE_ROWS: usize = 64;
 
-/// Fewest cubes the tiled gather takes on; a smaller layer runs [`direct_gather_kernel`].
-const TILED_MIN_CUBES: usize = 256;
+/// Fewest cubes the tiled gather takes on by default; a smaller layer runs
+/// [`direct_gather_kernel`]. The tiled kernel needs the rows' tile plan ([`RowTiles`], made on the
+/// host once per map and side); on an H100 its faster kernel repaid that only past a few
+/// thousand tiles, a U-Net on the JRDB-like scene (35,450 voxels, ≤ 1,108 tiles) being below.
+const TILED_MIN_CUBES: usize = 2048;
+
+/// [`TILED_MIN_CUBES`], or `PMUNET_GPU_TILED_MIN_CUBES` where set (read once; 0 = always tiled).
+fn tiled_min_cubes() -> usize {
+    static MIN: OnceLock<usize> = OnceLock::new();
+    *MIN.get_or_init(|| match std::env::var("PMUNET_GPU_TILED_MIN_CUBES") {
+        Ok(v) => v.trim().parse().unwrap_or_else(|_| panic!("PMUNET_GPU_TILED_MIN_CUBES must be a whole number, got {v:?}")),
+        Err(_) => TILED_MIN_CUBES,
+    })
+}
 
 /// Rows one unit of the direct gather computes.
 const DIRECT_UNIT_ROWS: usize = 4;
@@ -504,7 +517,7 @@ fn gather_conv(src: CubeTensor, weight: CubeTensor, gather: &GatherTables, table
     let tile_vectors = tile_vectors(c_out / vector);
     let col_tiles = (c_out / vector).div_ceil(tile_vectors);
     let tiles = rows.div_ceil(TILE_ROWS);
-    if tiles * col_tiles < TILED_MIN_CUBES {
+    if tiles * col_tiles < tiled_min_cubes() {
         let dim = CubeDim::new_1d(256);
         let count = calculate_cube_count_elemwise(&client, rows.div_ceil(DIRECT_UNIT_ROWS) * c_out / vector, dim);
         // Safety: rows and channels are bounded by the guard on the unit's position, partners by

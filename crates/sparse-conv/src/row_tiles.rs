@@ -7,8 +7,6 @@
 //! spconv's implicit GEMM does) makes a tile's rows alike, and each tile lists only the offsets
 //! some row of it uses.
 
-use rayon::prelude::*;
-
 use crate::kernel_map::NeighborTable;
 
 /// Rows in tile order and, per tile, the offsets its rows use.
@@ -24,39 +22,32 @@ pub(crate) struct RowTiles {
 impl RowTiles {
     /// Tiles of `tile_rows` rows of `table`, whose entries below `n_src` are partners.
     pub fn new(table: &NeighborTable, n_src: usize, tile_rows: usize) -> Self {
+        // Serial on purpose: it runs on the host between GPU launches of a forward pass, where a
+        // thread pool's wake-ups cost more than this work (measured on a 16-core GPU host).
         let present = |p: u32| (p as usize) < n_src;
         let volume = table.volume();
         // Each row's offset set, folded onto 64 bits for kernels over 4×4×4 (the sort key only).
         let masks: Vec<u64> = (0..table.rows())
-            .into_par_iter()
-            .map(|r| table.row(r).iter().enumerate().filter(|&(_, &p)| present(p)).fold(0u64, |m, (k, _)| m | 1 << (k % 64)))
+            .map(|r| table.row(r).iter().enumerate().fold(0u64, |m, (k, &p)| m | (present(p) as u64) << (k % 64)))
             .collect();
         // Sorted by offset set, then by row, so the order is one and the same on every run.
-        let mut keyed: Vec<u128> = masks.par_iter().enumerate().map(|(r, &m)| (m as u128) << 32 | r as u128).collect();
-        keyed.par_sort_unstable();
-        let order: Vec<u32> = keyed.into_iter().map(|key| key as u32).collect();
-        let per_tile: Vec<Vec<u32>> = order
-            .par_chunks(tile_rows.max(1))
-            .map(|tile| {
-                if volume <= 64 {
-                    let used = tile.iter().fold(0u64, |m, &r| m | masks[r as usize]);
-                    (0..volume as u32).filter(|&k| used >> k & 1 == 1).collect()
-                } else {
-                    let mut used = vec![false; volume];
-                    for &r in tile {
-                        for (k, &p) in table.row(r as usize).iter().enumerate() {
-                            used[k] |= present(p);
-                        }
-                    }
-                    used.iter().enumerate().filter(|&(_, &u)| u).map(|(k, _)| k as u32).collect()
-                }
-            })
-            .collect();
-        let mut start = Vec::with_capacity(per_tile.len() + 1);
-        start.push(0);
+        let order = radix_order(&masks);
+        let mut start = vec![0u32];
         let mut offsets = Vec::new();
-        for tile in per_tile {
-            offsets.extend_from_slice(&tile);
+        let mut used = vec![false; volume];
+        for tile in order.chunks(tile_rows.max(1)) {
+            if volume <= 64 {
+                let mask = tile.iter().fold(0u64, |m, &r| m | masks[r as usize]);
+                offsets.extend((0..volume as u32).filter(|&k| mask >> k & 1 == 1));
+            } else {
+                used.fill(false);
+                for &r in tile {
+                    for (k, &p) in table.row(r as usize).iter().enumerate() {
+                        used[k] |= present(p);
+                    }
+                }
+                offsets.extend(used.iter().enumerate().filter(|&(_, &u)| u).map(|(k, _)| k as u32));
+            }
             start.push(offsets.len() as u32);
         }
         Self { order, start, offsets }
@@ -68,11 +59,48 @@ impl RowTiles {
     }
 }
 
+/// Row indices ordered by `keys`, equal keys by index: a stable LSD radix sort on 11-bit digits
+/// up to the highest bit any key sets (27 bits for a 3×3×3 kernel: three passes).
+fn radix_order(keys: &[u64]) -> Vec<u32> {
+    const DIGIT: u32 = 11;
+    let bits = 64 - keys.iter().fold(0u64, |m, &k| m | k).leading_zeros();
+    let mut order: Vec<u32> = (0..keys.len() as u32).collect();
+    let mut next = vec![0u32; keys.len()];
+    let mut shift = 0;
+    while shift < bits {
+        let digit = |r: u32| ((keys[r as usize] >> shift) & ((1 << DIGIT) - 1)) as usize;
+        let mut count = vec![0u32; (1 << DIGIT) + 1];
+        for &r in &order {
+            count[digit(r) + 1] += 1;
+        }
+        for d in 1..count.len() {
+            count[d] += count[d - 1];
+        }
+        for &r in &order {
+            let slot = &mut count[digit(r)];
+            next[*slot as usize] = r;
+            *slot += 1;
+        }
+        std::mem::swap(&mut order, &mut next);
+        shift += DIGIT;
+    }
+    order
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::coords::{Coord, CoordIndex};
     use crate::kernel_map::KernelMap;
+
+    #[test]
+    fn radix_order_is_the_order_by_key_then_index() {
+        let keys: Vec<u64> = (0..5000u64).map(|i| ((i * 2654435761) % 97) | ((i % 7) << 40)).collect();
+        let mut expected: Vec<u32> = (0..keys.len() as u32).collect();
+        expected.sort_by_key(|&r| (keys[r as usize], r));
+        assert_eq!(radix_order(&keys), expected);
+        assert_eq!(radix_order(&[]), Vec::<u32>::new());
+    }
 
     #[test]
     fn tiles_cover_every_row_once_and_list_exactly_the_offsets_their_rows_use() {
