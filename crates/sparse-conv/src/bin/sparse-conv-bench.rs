@@ -59,6 +59,10 @@ struct Args {
     /// GPU backends: the size of the square f32 matmul timed as the device's reference figure.
     #[arg(long, default_value_t = 4096)]
     matmul_size: usize,
+    /// Leave out the down / up pair (whose kernels would otherwise mix into a GPU profile of the
+    /// submanifold figures).
+    #[arg(long)]
+    skip_strided: bool,
     /// Print one JSON object instead of the table.
     #[arg(long)]
     json: bool,
@@ -226,7 +230,13 @@ fn measure(args: &Args, scene_coords: &[sparse_conv::Coord]) -> anyhow::Result<R
     }
     let mut strided = Vec::new();
     // The peer's table times the strided pair at C = 64; other channel lists use their first.
-    let strided_channels = if args.channels.contains(&64) { Some(64) } else { args.channels.first().copied() };
+    let strided_channels = if args.skip_strided {
+        None
+    } else if args.channels.contains(&64) {
+        Some(64)
+    } else {
+        args.channels.first().copied()
+    };
     if let Some(c) = strided_channels {
         let ad = device.clone().autodiff();
         let x = Tensor::<2>::random([n, c], Distribution::Uniform(-1.0, 1.0), &ad).require_grad();
