@@ -320,7 +320,6 @@ fn weight_grad_kernel<F: Float, N: Size>(
     let k = CUBE_POS_Z as usize / slices;
     let slice = CUBE_POS_Z as usize % slices;
     let unit = UNIT_POS as usize;
-    let units = CUBE_DIM as usize;
     let out_units = comptime!(out_vectors / unit_out);
     let in_units = comptime!(in_vectors / unit_in);
     // A unit's vectors are `tx + v·out_units` and `ty + u·in_units`.
@@ -344,28 +343,8 @@ fn weight_grad_kernel<F: Float, N: Size>(
     }
     let mut p0 = from;
     while p0 < to {
-        let mut i = unit;
-        while i < step_pairs * in_vectors {
-            let p = p0 + i / in_vectors;
-            let c = i0 + i % in_vectors;
-            let mut v = zero;
-            if p < to && c < c_in_vectors {
-                v = x[input[p] as usize * c_in_vectors + c];
-            }
-            x_tile[i] = v;
-            i += units;
-        }
-        let mut i = unit;
-        while i < step_pairs * out_vectors {
-            let p = p0 + i / out_vectors;
-            let c = o0 + i % out_vectors;
-            let mut v = zero;
-            if p < to && c < c_out_vectors {
-                v = g[output[p] as usize * c_out_vectors + c];
-            }
-            g_tile[i] = v;
-            i += units;
-        }
+        stage_pair_rows::<F, N>(x, input, &mut x_tile, p0, to, i0, c_in_vectors, in_vectors, step_pairs);
+        stage_pair_rows::<F, N>(g, output, &mut g_tile, p0, to, o0, c_out_vectors, out_vectors, step_pairs);
         sync_cube();
         #[unroll]
         for q in 0..step_pairs {
@@ -406,6 +385,34 @@ fn weight_grad_kernel<F: Float, N: Size>(
                 }
             }
         }
+    }
+}
+
+/// Stages into `tile` (`pairs × tile_vectors`) the channel vectors `first..first + tile_vectors` of
+/// the rows `rows[p0..p0 + pairs]` of `src`, zeros past pair `to` or the row's `row_vectors`.
+#[cube]
+fn stage_pair_rows<F: Float, N: Size>(
+    src: &[Vector<F, N>],
+    rows: &[u32],
+    tile: &mut Shared<[Vector<F, N>]>,
+    p0: usize,
+    to: usize,
+    first: usize,
+    row_vectors: usize,
+    #[comptime] tile_vectors: usize,
+    #[comptime] pairs: usize,
+) {
+    let units = CUBE_DIM as usize;
+    let mut i = UNIT_POS as usize;
+    while i < pairs * tile_vectors {
+        let p = p0 + i / tile_vectors;
+        let c = first + i % tile_vectors;
+        let mut v = Vector::<F, N>::new(F::new(0.0));
+        if p < to && c < row_vectors {
+            v = src[rows[p] as usize * row_vectors + c];
+        }
+        tile[i] = v;
+        i += units;
     }
 }
 
