@@ -524,7 +524,8 @@ fn gather_conv(src: CubeTensor, weight: CubeTensor, gather: &GatherTables, table
     let tile_vectors = tile_vectors(c_out / vector);
     let col_tiles = (c_out / vector).div_ceil(tile_vectors);
     let tiles = rows.div_ceil(TILE_ROWS);
-    if tiles * col_tiles < tiled_min_cubes() {
+    // Tiles are the launch's second dimension, which a device limits to 65,535 cubes.
+    if tiles * col_tiles < tiled_min_cubes() || tiles > u16::MAX as usize {
         let dim = CubeDim::new_1d(256);
         let count = calculate_cube_count_elemwise(&client, rows.div_ceil(DIRECT_UNIT_ROWS) * c_out / vector, dim);
         // Safety: rows and channels are bounded by the guard on the unit's position, partners by
