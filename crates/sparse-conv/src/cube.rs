@@ -51,7 +51,10 @@ const TILED_MIN_CUBES: usize = 2048;
 fn tiled_min_cubes() -> usize {
     static MIN: OnceLock<usize> = OnceLock::new();
     *MIN.get_or_init(|| match std::env::var("PMUNET_GPU_TILED_MIN_CUBES") {
-        Ok(v) => v.trim().parse().unwrap_or_else(|_| panic!("PMUNET_GPU_TILED_MIN_CUBES must be a whole number, got {v:?}")),
+        Ok(v) => v.trim().parse().unwrap_or_else(|_| {
+            eprintln!("warning: PMUNET_GPU_TILED_MIN_CUBES={v:?} is not a whole number; using {TILED_MIN_CUBES}");
+            TILED_MIN_CUBES
+        }),
         Err(_) => TILED_MIN_CUBES,
     })
 }
@@ -65,9 +68,6 @@ const UNIT_ROWS: usize = 4;
 /// Most channel vectors a tile spans (output channels of the gather, either side of the weight
 /// gradient).
 const TILE_VECTORS: usize = 16;
-
-/// Most channel vectors of a tile one unit accumulates.
-const UNIT_VECTORS: usize = 1;
 
 /// Most reduced-channel vectors of the gather staged in shared memory per step.
 const STEP_VECTORS: usize = 4;
@@ -85,8 +85,8 @@ const WEIGHT_GRAD_CUBES: usize = 2048;
 /// A cube owns a tile of `tile_rows` rows (taken in [`RowTiles`] order) by `tile_vectors` vectors
 /// of output channels. For each offset the tile's rows use, it stages their partners' features
 /// and the offset's weight, `step_vectors` reduced vectors at a time, in shared memory; each unit
-/// multiplies its `unit_rows` rows by its `unit_vectors` vector columns from there (a register
-/// tile: each staged value loaded serves several multiply-adds). Every output element is one
+/// multiplies its `unit_rows` rows by its vector column from there (each staged weight vector
+/// serves all its rows; units of more vectors each ran slower on an H100). Every output element is one
 /// unit's sum in offset order: no atomics, the same result on every run, whatever else is in the
 /// batch.
 // CubeCL kernels index their buffers; they have no slice iterators.
@@ -108,27 +108,23 @@ fn gather_conv_kernel<F: Float, N: Size>(
     #[comptime] tile_rows: usize,
     #[comptime] unit_rows: usize,
     #[comptime] tile_vectors: usize,
-    #[comptime] unit_vectors: usize,
     #[comptime] step_vectors: usize,
 ) {
     let tile = CUBE_POS_Y as usize;
     let col = CUBE_POS_X as usize * tile_vectors;
     let unit = UNIT_POS as usize;
     let units = CUBE_DIM as usize;
-    let column_units = comptime!(tile_vectors / unit_vectors);
-    // A unit's columns are `tx + v·column_units`: neighbouring units read neighbouring vectors.
-    let tx = unit % column_units;
-    let ty = unit / column_units;
+    let tx = unit % tile_vectors;
+    let ty = unit / tile_vectors;
     let zero = Vector::<F, N>::new(F::new(0.0));
     let lanes = zero.vector_size();
     let mut partners = Shared::<[u32]>::new_slice(tile_rows);
     let mut a_tile = Shared::<[Vector<F, N>]>::new_slice(comptime!(tile_rows * step_vectors));
     let mut b_tile = Shared::<[Vector<F, N>]>::new_slice(comptime!(step_vectors * lanes * tile_vectors));
-    let mut acc = Array::<Vector<F, N>>::new(comptime!(unit_rows * unit_vectors));
+    let mut acc = Array::<Vector<F, N>>::new(unit_rows);
     let mut a = Array::<Vector<F, N>>::new(unit_rows);
-    let mut b = Array::<Vector<F, N>>::new(unit_vectors);
     #[unroll]
-    for j in 0..comptime!(unit_rows * unit_vectors) {
+    for j in 0..unit_rows {
         acc[j] = zero;
     }
     let c_red = c_red_vectors * lanes;
@@ -183,17 +179,10 @@ fn gather_conv_kernel<F: Float, N: Size>(
                 }
                 #[unroll]
                 for lane in 0..lanes {
-                    #[unroll]
-                    for v in 0..unit_vectors {
-                        b[v] = b_tile[(cv * lanes + lane) * tile_vectors + tx + v * column_units];
-                    }
+                    let b = b_tile[(cv * lanes + lane) * tile_vectors + tx];
                     #[unroll]
                     for j in 0..unit_rows {
-                        let x = Vector::new(a[j].extract(lane));
-                        #[unroll]
-                        for v in 0..unit_vectors {
-                            acc[j * unit_vectors + v] += x * b[v];
-                        }
+                        acc[j] += Vector::new(a[j].extract(lane)) * b;
                     }
                 }
             }
@@ -201,16 +190,12 @@ fn gather_conv_kernel<F: Float, N: Size>(
             sync_cube();
         }
     }
-    #[unroll]
-    for v in 0..unit_vectors {
-        let c = col + tx + v * column_units;
-        if c < c_out_vectors {
-            #[unroll]
-            for j in 0..unit_rows {
-                let t = tile * tile_rows + ty * unit_rows + j;
-                if t < rows {
-                    out[order[t] as usize * c_out_vectors + c] = acc[j * unit_vectors + v];
-                }
+    if col + tx < c_out_vectors {
+        #[unroll]
+        for j in 0..unit_rows {
+            let t = tile * tile_rows + ty * unit_rows + j;
+            if t < rows {
+                out[order[t] as usize * c_out_vectors + col + tx] = acc[j];
             }
         }
     }
@@ -295,8 +280,7 @@ fn direct_gather_kernel<F: Float, N: Size>(
 ///
 /// A cube owns one slice of one offset's pairs and a tile of `in_vectors` input-channel vectors
 /// by `out_vectors` output-channel vectors; it stages `step_pairs` pairs' rows of both sides in
-/// shared memory, and each unit accumulates `unit_in` input vectors (`N` rows each) by
-/// `unit_out` output vectors of the tile.
+/// shared memory, and each unit accumulates one input vector's `N` rows of one output vector.
 #[cube(launch_unchecked)]
 fn weight_grad_kernel<F: Float, N: Size>(
     x: &[Vector<F, N>],
@@ -311,20 +295,14 @@ fn weight_grad_kernel<F: Float, N: Size>(
     slices: usize,
     #[comptime] in_vectors: usize,
     #[comptime] out_vectors: usize,
-    #[comptime] unit_in: usize,
-    #[comptime] unit_out: usize,
     #[comptime] step_pairs: usize,
 ) {
     let o0 = CUBE_POS_X as usize * out_vectors;
     let i0 = CUBE_POS_Y as usize * in_vectors;
     let k = CUBE_POS_Z as usize / slices;
     let slice = CUBE_POS_Z as usize % slices;
-    let unit = UNIT_POS as usize;
-    let out_units = comptime!(out_vectors / unit_out);
-    let in_units = comptime!(in_vectors / unit_in);
-    // A unit's vectors are `tx + v·out_units` and `ty + u·in_units`.
-    let tx = unit % out_units;
-    let ty = unit / out_units;
+    let tx = UNIT_POS as usize % out_vectors;
+    let ty = UNIT_POS as usize / out_vectors;
     let begin = start[k] as usize;
     let len = start[k + 1] as usize - begin;
     let from = begin + len * slice / slices;
@@ -333,13 +311,10 @@ fn weight_grad_kernel<F: Float, N: Size>(
     let lanes = zero.vector_size();
     let mut x_tile = Shared::<[Vector<F, N>]>::new_slice(comptime!(step_pairs * in_vectors));
     let mut g_tile = Shared::<[Vector<F, N>]>::new_slice(comptime!(step_pairs * out_vectors));
-    let acc_len = comptime!(unit_in * lanes * unit_out);
-    let mut acc = Array::<Vector<F, N>>::new(acc_len);
-    let mut xs = Array::<Vector<F, N>>::new(unit_in);
-    let mut gs = Array::<Vector<F, N>>::new(unit_out);
+    let mut acc = Array::<Vector<F, N>>::new(lanes);
     #[unroll]
-    for a in 0..acc_len {
-        acc[a] = zero;
+    for lane in 0..lanes {
+        acc[lane] = zero;
     }
     let mut p0 = from;
     while p0 < to {
@@ -348,42 +323,21 @@ fn weight_grad_kernel<F: Float, N: Size>(
         sync_cube();
         #[unroll]
         for q in 0..step_pairs {
+            let xs = x_tile[q * in_vectors + ty];
+            let gs = g_tile[q * out_vectors + tx];
             #[unroll]
-            for u in 0..unit_in {
-                xs[u] = x_tile[q * in_vectors + ty + u * in_units];
-            }
-            #[unroll]
-            for v in 0..unit_out {
-                gs[v] = g_tile[q * out_vectors + tx + v * out_units];
-            }
-            #[unroll]
-            for u in 0..unit_in {
-                #[unroll]
-                for lane in 0..lanes {
-                    let xv = Vector::new(xs[u].extract(lane));
-                    #[unroll]
-                    for v in 0..unit_out {
-                        acc[(u * lanes + lane) * unit_out + v] += xv * gs[v];
-                    }
-                }
+            for lane in 0..lanes {
+                acc[lane] += Vector::new(xs.extract(lane)) * gs;
             }
         }
         sync_cube();
         p0 += step_pairs;
     }
-    #[unroll]
-    for u in 0..unit_in {
-        let ci = i0 + ty + u * in_units;
+    if i0 + ty < c_in_vectors && o0 + tx < c_out_vectors {
+        let base = ((slice * volume + k) * c_in_vectors + i0 + ty) * lanes;
         #[unroll]
-        for v in 0..unit_out {
-            let co = o0 + tx + v * out_units;
-            if ci < c_in_vectors && co < c_out_vectors {
-                let base = ((slice * volume + k) * c_in_vectors + ci) * lanes;
-                #[unroll]
-                for lane in 0..lanes {
-                    partial[(base + lane) * c_out_vectors + co] = acc[(u * lanes + lane) * unit_out + v];
-                }
-            }
+        for lane in 0..lanes {
+            partial[(base + lane) * c_out_vectors + o0 + tx] = acc[lane];
         }
     }
 }
@@ -551,10 +505,9 @@ fn gather_conv(src: CubeTensor, weight: CubeTensor, gather: &GatherTables, table
         return out;
     }
     let plan = gather.tiles.get_or_init(|| upload_tiles(&client, table, n_src));
-    let unit_vectors = UNIT_VECTORS.min(tile_vectors);
     let step_vectors = (c_red / vector).next_power_of_two().min(STEP_VECTORS);
     let count = CubeCount::Static(col_tiles as u32, plan.tiles as u32, 1);
-    let dim = CubeDim::new_1d((tile_vectors / unit_vectors * TILE_ROWS / UNIT_ROWS) as u32);
+    let dim = CubeDim::new_1d((tile_vectors * TILE_ROWS / UNIT_ROWS) as u32);
     // Safety: every index the kernel forms is in bounds: rows by `t < rows`, channels by the
     // column and reduced-vector guards, partners by `partner < n_src`, the tile plan by its
     // construction from this table.
@@ -579,7 +532,6 @@ fn gather_conv(src: CubeTensor, weight: CubeTensor, gather: &GatherTables, table
             TILE_ROWS,
             UNIT_ROWS,
             tile_vectors,
-            unit_vectors,
             step_vectors,
         );
     }
@@ -639,8 +591,7 @@ pub(crate) fn weight_grad(features: CubeTensor, grad_out: CubeTensor, map: &Kern
     let slices = WEIGHT_GRAD_CUBES.div_ceil(cubes_per_slice).clamp(1, (num_pairs / (4 * STEP_PAIRS * volume)).max(1));
     let partial = empty_f32(&features, Shape::new([slices, volume, c_in, c_out]));
     let count = CubeCount::Static(out_tiles as u32, in_tiles as u32, (volume * slices) as u32);
-    let (unit_in, unit_out) = (UNIT_VECTORS.min(in_vectors), UNIT_VECTORS.min(out_vectors));
-    let dim = CubeDim::new_1d((in_vectors / unit_in * out_vectors / unit_out) as u32);
+    let dim = CubeDim::new_1d((in_vectors * out_vectors) as u32);
     // Safety: pair rows are rows of `features` and `grad_out`; channels are guarded; every
     // element of `partial` is written by the cube of its slice, offset and tile.
     unsafe {
@@ -661,8 +612,6 @@ pub(crate) fn weight_grad(features: CubeTensor, grad_out: CubeTensor, map: &Kern
             slices,
             in_vectors,
             out_vectors,
-            unit_in,
-            unit_out,
             STEP_PAIRS,
         );
     }
