@@ -404,6 +404,8 @@ struct TilePlan {
     start: Handle,
     offsets: Handle,
     tiles: usize,
+    /// Entries of `offsets` (at least one: an empty list is uploaded as one unused entry).
+    offsets_len: usize,
 }
 
 /// A map's tables on one device, each uploaded the first time a kernel needs it.
@@ -431,7 +433,13 @@ fn upload_u32(client: &Client, values: &[u32]) -> Handle {
 fn upload_tiles(client: &Client, table: &NeighborTable, n_src: usize) -> TilePlan {
     // Host work of the map's preparation, counted with the map build.
     let tiles = in_kernel(Kernel::MapBuild, || RowTiles::new(table, n_src, TILE_ROWS));
-    TilePlan { order: upload_u32(client, &tiles.order), start: upload_u32(client, &tiles.start), offsets: upload_u32(client, &tiles.offsets), tiles: tiles.tiles() }
+    TilePlan {
+        order: upload_u32(client, &tiles.order),
+        start: upload_u32(client, &tiles.start),
+        offsets: upload_u32(client, &tiles.offsets),
+        tiles: tiles.tiles(),
+        offsets_len: tiles.offsets.len().max(1),
+    }
 }
 
 fn empty_f32(like: &CubeTensor, shape: Shape) -> CubeTensor {
@@ -522,7 +530,7 @@ fn gather_conv(src: CubeTensor, weight: CubeTensor, gather: &GatherTables, table
             BufferArg::from_raw_parts(gather.table.clone(), rows * volume),
             BufferArg::from_raw_parts(plan.order.clone(), rows),
             BufferArg::from_raw_parts(plan.start.clone(), plan.tiles + 1),
-            BufferArg::from_raw_parts(plan.offsets.clone(), plan.tiles * volume),
+            BufferArg::from_raw_parts(plan.offsets.clone(), plan.offsets_len),
             vectors(&out, vector),
             n_src as u32,
             rows,
