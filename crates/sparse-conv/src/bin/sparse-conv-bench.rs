@@ -307,31 +307,31 @@ fn time_op(device: &Device, map: &Arc<KernelMap>, c: usize, warmup: usize, runs:
     let (n, volume) = (map.n_in(), map.volume());
     let x = Tensor::<2>::random([n, c], Distribution::Uniform(-1.0, 1.0), device);
     let w = Tensor::<3>::random([volume, c, c], Distribution::Uniform(-0.1, 0.1), device);
-    let fwd = per_call(time_ms(warmup, runs, || {
-        for _ in 0..queue {
-            std::hint::black_box(sparse_conv(x.clone(), w.clone(), map));
-        }
-        device.sync().expect("device sync");
-    }), queue);
+    let fwd = time_per_call(warmup, runs, queue, device, || {
+        std::hint::black_box(sparse_conv(x.clone(), w.clone(), map));
+    });
     let ad = device.clone().autodiff();
     let xa = Tensor::<2>::random([n, c], Distribution::Uniform(-1.0, 1.0), &ad).require_grad();
     let wa = Tensor::<3>::random([volume, c, c], Distribution::Uniform(-0.1, 0.1), &ad).require_grad();
     let grad = Tensor::<2>::random([map.n_out(), c], Distribution::Uniform(-1.0, 1.0), &ad);
-    let fwd_bwd = per_call(time_ms(warmup, runs, || {
-        for _ in 0..queue {
-            let out = sparse_conv(xa.clone(), wa.clone(), map);
-            let grads = backward_from(out, grad.clone());
-            let gx = xa.grad(&grads).expect("feature gradient");
-            let gw = wa.grad(&grads).expect("weight gradient");
-            std::hint::black_box((gx, gw));
-        }
-        ad.sync().expect("device sync");
-    }), queue);
+    let fwd_bwd = time_per_call(warmup, runs, queue, &ad, || {
+        let out = sparse_conv(xa.clone(), wa.clone(), map);
+        let grads = backward_from(out, grad.clone());
+        let gx = xa.grad(&grads).expect("feature gradient");
+        let gw = wa.grad(&grads).expect("weight gradient");
+        std::hint::black_box((gx, gw));
+    });
     (fwd, fwd_bwd)
 }
 
-/// A timing of `queue` calls as the time of one.
-fn per_call(t: Timing, queue: usize) -> Timing {
+/// Time per call of `f`, each timed run being `queue` calls and one sync of `device`.
+fn time_per_call(warmup: usize, runs: usize, queue: usize, device: &Device, mut f: impl FnMut()) -> Timing {
+    let t = time_ms(warmup, runs, || {
+        for _ in 0..queue {
+            f();
+        }
+        device.sync().expect("device sync");
+    });
     Timing { median_ms: t.median_ms / queue as f64, min_ms: t.min_ms / queue as f64 }
 }
 
@@ -339,12 +339,10 @@ fn per_call(t: Timing, queue: usize) -> Timing {
 fn device_matmul(device: &Device, size: usize, warmup: usize, runs: usize, queue: usize) -> GemmCeiling {
     let a = Tensor::<2>::random([size, size], Distribution::Uniform(-1.0, 1.0), device);
     let b = Tensor::<2>::random([size, size], Distribution::Uniform(-1.0, 1.0), device);
-    let ms = per_call(time_ms(warmup, runs, || {
-        for _ in 0..queue {
-            std::hint::black_box(a.clone().matmul(b.clone()));
-        }
-        device.sync().expect("device sync");
-    }), queue).median_ms;
+    let ms = time_per_call(warmup, runs, queue, device, || {
+        std::hint::black_box(a.clone().matmul(b.clone()));
+    })
+    .median_ms;
     GemmCeiling { size, ms, gflops: 2.0 * (size as f64).powi(3) / ms / 1e6 }
 }
 
