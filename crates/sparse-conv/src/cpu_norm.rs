@@ -33,12 +33,14 @@ pub fn channel_stats<T: Element>(x: &[T], c: usize) -> Vec<T> {
     // Sums of (x − x_0): shifted by the first row, the variance does not lose its digits to
     // cancellation when a channel's mean is large against its spread.
     let shift = &x[..c];
+    let shift_lanes = lane_groups(shift);
     let sums = channel_sums(x.par_chunks(CHUNK_ROWS * c).map(|rows| {
-        block_sums(c, rows.chunks_exact(c), |row, s1, s2| {
-            for (((&v, &k), a1), a2) in row.iter().zip(shift).zip(s1.iter_mut()).zip(s2.iter_mut()) {
-                let d = v - k;
-                *a1 += d;
-                *a2 += d * d;
+        block_sums(c, rows, rows, |group, x, _, s1, s2| {
+            let k = &shift_lanes[group];
+            for l in 0..LANES {
+                let d = x[l] - k[l];
+                s1[l] += d;
+                s2[l] += d * d;
             }
         })
     }));
@@ -54,24 +56,79 @@ pub fn channel_stats<T: Element>(x: &[T], c: usize) -> Vec<T> {
 /// short enough to keep f32 rounding small, long enough for the vector loops to dominate.
 const BLOCK_ROWS: usize = 16;
 
-/// Two per-channel sums over `rows`: `add(row, s1, s2)` accumulates one row into the block's
-/// sums in `T`, which are added into f64 totals block by block. Returns `[s1.., s2..]`.
-fn block_sums<'a, T: Element>(c: usize, rows: impl Iterator<Item = &'a [T]>, mut add: impl FnMut(&'a [T], &mut [T], &mut [T])) -> Vec<f64> {
-    let mut total = vec![0.0f64; 2 * c];
-    let mut s1 = vec![T::ZERO; c];
-    let mut s2 = vec![T::ZERO; c];
-    let mut rows = rows.peekable();
-    while rows.peek().is_some() {
-        s1.fill(T::ZERO);
-        s2.fill(T::ZERO);
-        for row in rows.by_ref().take(BLOCK_ROWS) {
-            add(row, &mut s1, &mut s2);
-        }
-        for (t, s) in total.iter_mut().zip(s1.iter().chain(&s2)) {
-            *t += s.to_f64();
+/// Channels whose sums a reduction carries together, in registers: one AVX-512 vector of f32.
+const LANES: usize = 16;
+
+/// The `LANES` values of `row` from channel `j0`, zero past its end.
+#[inline(always)]
+fn lanes<T: Element>(row: &[T], j0: usize) -> [T; LANES] {
+    match row.get(j0..j0 + LANES) {
+        Some(v) => v.try_into().expect("LANES values"),
+        None => {
+            let mut out = [T::ZERO; LANES];
+            out[..row.len() - j0].copy_from_slice(&row[j0..]);
+            out
         }
     }
-    total
+}
+
+/// A per-channel parameter as groups of [`LANES`] channels (the last padded with zeros).
+fn lane_groups<T: Element>(v: &[T]) -> Vec<[T; LANES]> {
+    (0..v.len()).step_by(LANES).map(|j0| lanes(v, j0)).collect()
+}
+
+/// Two per-channel sums over the rows of `x` and `y` (`c` values each; `y` as many rows as `x`):
+/// `add(group, x, y, s1, s2)` accumulates one row's [`LANES`] channels of lane group `group`
+/// into the block's sums in `T`, which are added into f64 totals block by block. Each group's
+/// sums stay in registers over the block's rows; every channel still sums its rows in row order,
+/// as one row at a time would. Returns `[s1.., s2..]`.
+fn block_sums<T: Element, F: LaneSums<T>>(c: usize, x: &[T], y: &[T], add: F) -> Vec<f64> {
+    #[cfg(target_arch = "x86_64")]
+    if crate::avx512::available() {
+        // A closure passed to `vectorized` is not inlined reliably; this body is.
+        #[target_feature(enable = "avx512f")]
+        unsafe fn with_avx512<T: Element, F: LaneSums<T>>(c: usize, x: &[T], y: &[T], add: &F) -> Vec<f64> {
+            block_sums_body(c, x, y, add)
+        }
+        // SAFETY: the CPU has AVX-512F.
+        return unsafe { with_avx512(c, x, y, &add) };
+    }
+    block_sums_body(c, x, y, &add)
+}
+
+/// What [`block_sums`] accumulates: one row's lane group into the block's two sums.
+trait LaneSums<T>: Fn(usize, &[T; LANES], &[T; LANES], &mut [T; LANES], &mut [T; LANES]) {}
+impl<T, F: Fn(usize, &[T; LANES], &[T; LANES], &mut [T; LANES], &mut [T; LANES])> LaneSums<T> for F {}
+
+#[inline(always)]
+fn block_sums_body<T: Element, F: LaneSums<T>>(c: usize, x: &[T], y: &[T], add: &F) -> Vec<f64> {
+    let n = x.len() / c;
+    let groups = c.div_ceil(LANES);
+    // The f64 totals by lane group too, so that adding a block's sums is vector code as well.
+    let mut totals = vec![[[0.0f64; LANES]; 2]; groups];
+    for b0 in (0..n).step_by(BLOCK_ROWS) {
+        let rows = b0..(b0 + BLOCK_ROWS).min(n);
+        for (group, total) in totals.iter_mut().enumerate() {
+            let j0 = group * LANES;
+            let (mut s1, mut s2) = ([T::ZERO; LANES], [T::ZERO; LANES]);
+            for r in rows.clone() {
+                let (xr, yr) = (&x[r * c..(r + 1) * c], &y[r * c..(r + 1) * c]);
+                add(group, &lanes(xr, j0), &lanes(yr, j0), &mut s1, &mut s2);
+            }
+            for l in 0..LANES {
+                total[0][l] += s1[l].to_f64();
+                total[1][l] += s2[l].to_f64();
+            }
+        }
+    }
+    let mut out = vec![0.0f64; 2 * c];
+    for (group, total) in totals.iter().enumerate() {
+        let j0 = group * LANES;
+        let w = LANES.min(c - j0);
+        out[j0..j0 + w].copy_from_slice(&total[0][..w]);
+        out[c + j0..c + j0 + w].copy_from_slice(&total[1][..w]);
+    }
+    out
 }
 
 /// Adds the chunks' totals in chunk order (the order does not depend on the threads).
@@ -205,12 +262,12 @@ impl<'a, T: Element> ConvEpilogue<'a, T> {
 pub fn relu_grad<T: Element>(y: &[T], grad_out: &[T]) -> Vec<T> {
     assert_eq!(y.len(), grad_out.len(), "ReLU output and its gradient differ in size");
     const ELEMS: usize = 1 << 16;
-    filled_in_chunks(y.len(), ELEMS, |chunk, dst| {
+    filled_in_chunks(y.len(), ELEMS, |chunk, dst| vectorized(|| {
         let (y, g) = (&y[chunk * ELEMS..][..dst.len()], &grad_out[chunk * ELEMS..][..dst.len()]);
         for j in 0..dst.len() {
             dst[j].write(if y[j] <= T::ZERO { T::ZERO } else { g[j] });
         }
-    })
+    }))
 }
 
 /// `[Σ dz·x̂ ; Σ dz]` per channel, i.e. `[dγ ; dβ]`, where `dz` is `dy` through the ReLU's mask
@@ -223,17 +280,21 @@ pub fn param_grads<T: Element>(x: &[T], grad_out: &[T], stats: &[T], gamma: &[T]
     if c == 0 {
         return Vec::new();
     }
-    let mean = &stats[..c];
+    let (a_lanes, b_lanes, mean_lanes) = (lane_groups(&a), lane_groups(&b), lane_groups(&stats[..c]));
     let sums = channel_sums(x.par_chunks(CHUNK_ROWS * c).zip(grad_out.par_chunks(CHUNK_ROWS * c)).map(|(rows, grads)| {
-        let mut grads = grads.chunks_exact(c);
-        block_sums(c, rows.chunks_exact(c), |row, dgamma, dbeta| {
-            let grad = grads.next().expect("as many gradient rows as input rows");
-            if relu {
-                param_row::<T, true>(row, grad, &a, &b, mean, dgamma, dbeta);
-            } else {
-                param_row::<T, false>(row, grad, &a, &b, mean, dgamma, dbeta);
-            }
-        })
+        let params = |group: usize| (&a_lanes[group], &b_lanes[group], &mean_lanes[group]);
+        // One small closure per case, each inlined whole into the vector loop.
+        if relu {
+            block_sums(c, rows, grads, |group, row, grad, dgamma, dbeta| {
+                let (a, b, mean) = params(group);
+                param_lanes::<T, true>(row, grad, a, b, mean, dgamma, dbeta)
+            })
+        } else {
+            block_sums(c, rows, grads, |group, row, grad, dgamma, dbeta| {
+                let (a, b, mean) = params(group);
+                param_lanes::<T, false>(row, grad, a, b, mean, dgamma, dbeta)
+            })
+        }
     }));
     let (dgamma, dbeta) = sums.split_at(c);
     dgamma.iter().zip(&inv_std).map(|(g, s)| T::from_f64(g * s)).chain(dbeta.iter().map(|&b| T::from_f64(b))).collect()
@@ -245,13 +306,19 @@ fn masked<T: Element, const RELU: bool>(x: T, a: T, b: T, dy: T) -> T {
     if RELU && x * a + b <= T::ZERO { T::ZERO } else { dy }
 }
 
-/// One row's terms of [`param_grads`]' sums. The slices are cut to one length and `RELU` is a
-/// constant, so the loop compiles to straight vector code.
+/// One row's terms of [`param_grads`]' sums, for one group of [`LANES`] channels. `RELU` is a
+/// constant and the lanes fixed, so the loop compiles to straight vector code.
 #[inline(always)]
-fn param_row<T: Element, const RELU: bool>(row: &[T], grad: &[T], a: &[T], b: &[T], mean: &[T], dgamma: &mut [T], dbeta: &mut [T]) {
-    let c = row.len();
-    let (grad, a, b, mean, dgamma, dbeta) = (&grad[..c], &a[..c], &b[..c], &mean[..c], &mut dgamma[..c], &mut dbeta[..c]);
-    for j in 0..c {
+fn param_lanes<T: Element, const RELU: bool>(
+    row: &[T; LANES],
+    grad: &[T; LANES],
+    a: &[T; LANES],
+    b: &[T; LANES],
+    mean: &[T; LANES],
+    dgamma: &mut [T; LANES],
+    dbeta: &mut [T; LANES],
+) {
+    for j in 0..LANES {
         let dz = masked::<T, RELU>(row[j], a[j], b[j], grad[j]);
         dbeta[j] += dz;
         dgamma[j] += dz * (row[j] - mean[j]);
@@ -317,7 +384,25 @@ pub fn input_grad<T: Element>(
 /// A `len`-element output of `c`-channel rows written [`CHUNK_ROWS`] rows per parallel task;
 /// `fill` must write every element of the chunk it is given.
 fn map_rows<T: Element>(len: usize, c: usize, fill: impl Fn(usize, &mut [MaybeUninit<T>]) + Sync) -> Vec<T> {
-    filled_in_chunks(len, CHUNK_ROWS * c, fill)
+    filled_in_chunks(len, CHUNK_ROWS * c, |chunk, dst| vectorized(|| fill(chunk, dst)))
+}
+
+/// Runs `f` compiled for AVX-512 where the CPU has it (and `PMUNET_AVX512` is not `0`). The
+/// passes here are plain loops over channels, which LLVM vectorizes for the features of the
+/// function they are inlined into; the default x86-64 target has 128-bit SSE2 only. Without
+/// fused multiply-adds (Rust never contracts `a·b + c`) the results are the same bits either way.
+#[inline(always)]
+fn vectorized<R>(f: impl FnOnce() -> R) -> R {
+    #[cfg(target_arch = "x86_64")]
+    if crate::avx512::available() {
+        #[target_feature(enable = "avx512f")]
+        unsafe fn with_avx512<R>(f: impl FnOnce() -> R) -> R {
+            f()
+        }
+        // SAFETY: the CPU has AVX-512F.
+        return unsafe { with_avx512(f) };
+    }
+    f()
 }
 
 #[cfg(test)]
