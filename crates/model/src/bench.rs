@@ -9,7 +9,8 @@ use std::time::Instant;
 use data_jrdb::Batch;
 use serde::Serialize;
 use sparse_conv::burn::module::Module;
-use sparse_conv::burn::optim::{AdamConfig, GradientsParams};
+use sparse_conv::FusedAdamConfig;
+use sparse_conv::burn::optim::GradientsParams;
 use sparse_conv::burn::tensor::Device;
 use sparse_conv::{Coord, scene};
 
@@ -144,7 +145,7 @@ fn measure<M: Detector>(mut model: M, batch: &Batch, device: &Device, parts: Par
         figures.peak_forward_mib = Some(peak_rss_mb());
     }
     if parts != Parts::Inference {
-        let mut optim = AdamConfig::new().init();
+        let mut optim = FusedAdamConfig::new().init();
         let phases = Cell::new([0.0f64; 3]);
         let mut step = || {
             let t = Instant::now();

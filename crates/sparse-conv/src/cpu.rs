@@ -24,6 +24,7 @@ pub trait Element:
     + std::ops::Add<Output = Self>
     + std::ops::Sub<Output = Self>
     + std::ops::Mul<Output = Self>
+    + std::ops::Div<Output = Self>
     + 'static
 {
     /// `C = A·B + beta·C` with arbitrary strides (matrixmultiply's contract).
@@ -41,6 +42,7 @@ pub trait Element:
     const ONE: Self;
     fn to_f64(self) -> f64;
     fn from_f64(v: f64) -> Self;
+    fn sqrt(self) -> Self;
 
     /// [`weight_grad`] by a kernel specific to this type and CPU, where one runs.
     fn weight_grad_native(_x: &[Self], _c_in: usize, _grad_out: &[Self], _c_out: usize, _pairs: &OffsetPairs) -> Option<Vec<Self>> {
@@ -74,6 +76,9 @@ impl Element for f32 {
     fn from_f64(v: f64) -> f32 {
         v as f32
     }
+    fn sqrt(self) -> f32 {
+        f32::sqrt(self)
+    }
 
     #[cfg(target_arch = "x86_64")]
     fn weight_grad_native(x: &[f32], c_in: usize, grad_out: &[f32], c_out: usize, pairs: &OffsetPairs) -> Option<Vec<f32>> {
@@ -105,6 +110,9 @@ impl Element for f64 {
     }
     fn from_f64(v: f64) -> f64 {
         v
+    }
+    fn sqrt(self) -> f64 {
+        f64::sqrt(self)
     }
 }
 
@@ -279,6 +287,25 @@ pub(crate) fn filled_in_chunks<T: Send>(len: usize, chunk: usize, fill: impl Fn(
 pub(crate) struct SyncPtr<T>(pub(crate) *mut T);
 unsafe impl<T> Send for SyncPtr<T> {}
 unsafe impl<T> Sync for SyncPtr<T> {}
+
+/// Runs `f` compiled for AVX-512 where the CPU has it (and `PMUNET_AVX512` is not `0`). Plain
+/// loops over channels or elements, inlined into `f` (a closure that calls an
+/// `#[inline(always)]` function is, reliably), are vectorized for the features of the function
+/// they land in; the default x86-64 target has 128-bit SSE2 only. Without fused multiply-adds
+/// (Rust never contracts `a·b + c`) the results are the same bits either way.
+#[inline(always)]
+pub(crate) fn vectorized<R>(f: impl FnOnce() -> R) -> R {
+    #[cfg(target_arch = "x86_64")]
+    if crate::avx512::available() {
+        #[target_feature(enable = "avx512f")]
+        unsafe fn with_avx512<R>(f: impl FnOnce() -> R) -> R {
+            f()
+        }
+        // SAFETY: the CPU has AVX-512F.
+        return unsafe { with_avx512(f) };
+    }
+    f()
+}
 
 /// Offset-major gather–GEMM–scatter: for each offset in a fixed order, its pairs in chunks of
 /// [`CHUNK_ROWS`] (gather rows, one GEMM with `W_k`, add the products to their destination rows).

@@ -18,7 +18,7 @@ use std::mem::MaybeUninit;
 
 use rayon::prelude::*;
 
-use crate::cpu::{Element, filled_in_chunks};
+use crate::cpu::{Element, filled_in_chunks, vectorized};
 
 /// Rows per partial sum and per parallel task.
 const CHUNK_ROWS: usize = 1024;
@@ -385,24 +385,6 @@ pub fn input_grad<T: Element>(
 /// `fill` must write every element of the chunk it is given.
 fn map_rows<T: Element>(len: usize, c: usize, fill: impl Fn(usize, &mut [MaybeUninit<T>]) + Sync) -> Vec<T> {
     filled_in_chunks(len, CHUNK_ROWS * c, |chunk, dst| vectorized(|| fill(chunk, dst)))
-}
-
-/// Runs `f` compiled for AVX-512 where the CPU has it (and `PMUNET_AVX512` is not `0`). The
-/// passes here are plain loops over channels, which LLVM vectorizes for the features of the
-/// function they are inlined into; the default x86-64 target has 128-bit SSE2 only. Without
-/// fused multiply-adds (Rust never contracts `a·b + c`) the results are the same bits either way.
-#[inline(always)]
-fn vectorized<R>(f: impl FnOnce() -> R) -> R {
-    #[cfg(target_arch = "x86_64")]
-    if crate::avx512::available() {
-        #[target_feature(enable = "avx512f")]
-        unsafe fn with_avx512<R>(f: impl FnOnce() -> R) -> R {
-            f()
-        }
-        // SAFETY: the CPU has AVX-512F.
-        return unsafe { with_avx512(f) };
-    }
-    f()
 }
 
 #[cfg(test)]

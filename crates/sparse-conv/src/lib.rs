@@ -9,6 +9,7 @@
 //! - [`backend`]: the Burn backend extension and its `Autodiff` backward.
 //! - [`cpu_norm`], [`batch_norm`]: batch norm (+ ReLU, + a residual's sum) as one op with its
 //!   own backward.
+//! - [`adam`]: Adam with the parameter and both moments updated in one pass per parameter.
 //! - [`concat`]: channel concatenation (skip connections) as one op with its own backward.
 //! - [`conv_norm`]: a conv and the batch norm after it at inference (fixed statistics, with
 //!   its ReLU or a residual) as one op.
@@ -20,6 +21,7 @@
 //! - [`heap`]: the binaries' malloc policy (freed tensor memory stays in the process).
 //! - [`timing`]: medians and peak memory for the benchmark binaries.
 
+pub mod adam;
 #[cfg(target_arch = "x86_64")]
 mod avx512;
 pub mod backend;
@@ -41,6 +43,7 @@ pub mod tensor;
 pub mod timing;
 
 pub use backend::SparseConvBackend;
+pub use adam::{AdamBackend, FusedAdam, FusedAdamConfig};
 pub use batch_norm::{BatchNormBackend, Epilogue, batch_norm_eval, batch_norm_train};
 pub use concat::{ChannelConcatBackend, concat_channels};
 pub use conv_norm::{ConvNormBackend, sparse_conv_norm_eval};

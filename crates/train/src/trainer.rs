@@ -12,11 +12,12 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use burn::grad_clipping::GradientClippingConfig;
 use burn::optim::decay::WeightDecayConfig;
-use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
+use burn::optim::{GradientsParams, ModuleOptimizer};
 use burn::tensor::Device;
 use indicatif::ProgressBar;
 use model::{Detector, LossTerms, ModelConfig};
 use serde::{Deserialize, Serialize};
+use sparse_conv::FusedAdamConfig;
 
 use crate::backend::init_threads;
 use crate::checkpoint::{Checkpoints, Slot, TrainState};
@@ -65,9 +66,9 @@ pub struct TrainSummary {
     pub train_seconds: f64,
 }
 
-/// Builds Adam from the config.
+/// Builds Adam from the config: [`FusedAdamConfig`], Burn's Adam in one pass per parameter.
 pub fn optimizer(cfg: &OptimizerConfig) -> ModuleOptimizer {
-    let mut adam = AdamConfig::new().with_beta_1(cfg.beta_1).with_beta_2(cfg.beta_2).with_epsilon(cfg.epsilon).with_amsgrad(cfg.amsgrad);
+    let mut adam = FusedAdamConfig::new().with_beta_1(cfg.beta_1).with_beta_2(cfg.beta_2).with_epsilon(cfg.epsilon).with_amsgrad(cfg.amsgrad);
     if cfg.weight_decay > 0.0 {
         adam = adam.with_weight_decay(Some(WeightDecayConfig { penalty: cfg.weight_decay }));
     }

@@ -1,0 +1,257 @@
+//! Adam with the parameter and both moments updated in one pass: the optimiser pmunet trains
+//! with.
+//!
+//! Why not Burn's `Adam` as is: its step is about a dozen element-wise tensor ops per parameter
+//! (scaled moments, a square, a square root, the bias corrections), each a pass over the
+//! parameter into a new buffer; on the CPU backends that is ~0.11 s of a 2.5 s MinkUNet training
+//! step (21.7 M parameters). Here the CPU backends run [`adam_update`], one pass; other backends
+//! compose the same math from Burn's primitives (the trait's default body). The state is Burn's
+//! [`AdamState`], so either optimiser resumes the other's checkpoints, and AMSGrad (which keeps a
+//! third moment) runs Burn's own step.
+//!
+//! The arithmetic is Burn's, operation for operation, in the parameter's type: with `g` the
+//! gradient (plus `λ·θ` with weight decay λ), `m₁ = β₁·m₁ + (1 − β₁)·g`,
+//! `m₂ = β₂·m₂ + (1 − β₂)·g²`, and `θ = θ − lr·(m₁·c) / (√m₂ + ε·b)` with `b = √(1 − β₂ᵗ)` and
+//! `c = b / (1 − β₁ᵗ)`, the scalars computed in f32 as Burn does.
+#![allow(deprecated)]
+
+use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
+use burn::backend::tensor::FloatTensor;
+use burn::backend::{Autodiff, Backend, Dispatch, Flex, NdArray, Scalar, TensorMetadata, backend_extension};
+use burn::config::Config;
+use burn::grad_clipping::GradientClippingConfig;
+use burn::optim::decay::WeightDecayConfig;
+use burn::optim::{Adam, AdamConfig, AdamState, AdaptiveMomentumState, LearningRate, ModuleOptimizer, Optimizer};
+use burn::tensor::{Device, Shape, Slice, Tensor};
+use burn_cubecl::CubeBackend;
+use rayon::prelude::*;
+
+use crate::backend::{Host, on_host};
+use crate::cpu::{Element, SyncPtr, assume_init, scratch, vectorized};
+
+/// A backend that runs one Adam step of a flat parameter.
+#[backend_extension(NdArray, Flex, Cube, Fusion, Autodiff)]
+pub trait AdamBackend: Backend {
+    /// `[θ'; m₁'; m₂']` as `[3, n]`, from the flat `[n]` parameter `θ`, its gradient and moments
+    /// (zeros before the first step). The scalars are [`AdamScalars`]' fields.
+    #[allow(clippy::too_many_arguments)]
+    #[fusion(dtype = param, shape = Shape::new([3, param[0]]))]
+    fn adam_step(
+        param: FloatTensor<Self>,
+        grad: FloatTensor<Self>,
+        moment_1: FloatTensor<Self>,
+        moment_2: FloatTensor<Self>,
+        lr: f64,
+        beta_1: f64,
+        beta_2: f64,
+        weight_decay: f64,
+        correction: f64,
+        epsilon: f64,
+    ) -> FloatTensor<Self> {
+        let n = param.shape()[0];
+        let s = |v: f64| Scalar::Float(v);
+        let grad = match weight_decay {
+            0.0 => grad,
+            wd => Self::float_add(Self::float_mul_scalar(param.clone(), s(wd)), grad),
+        };
+        let moment_1 = Self::float_add(Self::float_mul_scalar(moment_1, s(beta_1)), Self::float_mul_scalar(grad.clone(), s((1.0 - beta_1 as f32) as f64)));
+        let moment_2 = Self::float_add(Self::float_mul_scalar(moment_2, s(beta_2)), Self::float_mul_scalar(Self::float_mul(grad.clone(), grad), s((1.0 - beta_2 as f32) as f64)));
+        let step = Self::float_div(Self::float_mul_scalar(moment_1.clone(), s(correction)), Self::float_add_scalar(Self::float_sqrt(moment_2.clone()), s(epsilon)));
+        let param = Self::float_sub(param, Self::float_mul_scalar(step, s(lr)));
+        let row = |t: FloatTensor<Self>| Self::float_reshape(t, Shape::new([1, n]));
+        Self::float_cat(vec![row(param), row(moment_1), row(moment_2)], 0)
+    }
+}
+
+/// The scalars of one step, in the parameter's type.
+#[derive(Debug, Clone, Copy)]
+pub struct AdamScalars<T> {
+    pub lr: T,
+    pub beta_1: T,
+    pub beta_2: T,
+    /// λ, 0 without weight decay.
+    pub weight_decay: T,
+    /// `c = √(1 − β₂ᵗ) / (1 − β₁ᵗ)`.
+    pub correction: T,
+    /// `ε·√(1 − β₂ᵗ)`.
+    pub epsilon: T,
+}
+
+/// Elements per parallel task.
+const CHUNK: usize = 1 << 15;
+
+/// One Adam step over slices: `[θ'.., m₁'.., m₂'..]` (see the module's formulas).
+pub fn adam_update<T: Element>(param: &[T], grad: &[T], moment_1: &[T], moment_2: &[T], s: AdamScalars<T>) -> Vec<T> {
+    let n = param.len();
+    assert!(grad.len() == n && moment_1.len() == n && moment_2.len() == n, "Adam's parameter, gradient and moments differ in size");
+    let mut out = scratch::<T>(3 * n);
+    let out_ptr = SyncPtr(out.as_mut_ptr().cast::<T>());
+    let out_ptr = &out_ptr;
+    (0..n.div_ceil(CHUNK)).into_par_iter().for_each(|chunk| {
+        let range = chunk * CHUNK..((chunk + 1) * CHUNK).min(n);
+        // SAFETY: the three regions of this chunk are written by this task only.
+        let (p, m1, m2) = unsafe {
+            let at = |region: usize| std::slice::from_raw_parts_mut(out_ptr.0.add(region * n + range.start), range.len());
+            (at(0), at(1), at(2))
+        };
+        vectorized(|| adam_chunk(&param[range.clone()], &grad[range.clone()], &moment_1[range.clone()], &moment_2[range.clone()], s, p, m1, m2));
+    });
+    // SAFETY: the chunks cover every element of the three regions.
+    unsafe { assume_init(out) }
+}
+
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn adam_chunk<T: Element>(param: &[T], grad: &[T], moment_1: &[T], moment_2: &[T], s: AdamScalars<T>, p: &mut [T], m1: &mut [T], m2: &mut [T]) {
+    let (one_minus_beta_1, one_minus_beta_2) = (T::ONE - s.beta_1, T::ONE - s.beta_2);
+    let n = param.len();
+    let (grad, moment_1, moment_2, p, m1, m2) = (&grad[..n], &moment_1[..n], &moment_2[..n], &mut p[..n], &mut m1[..n], &mut m2[..n]);
+    for j in 0..n {
+        let g = if s.weight_decay == T::ZERO { grad[j] } else { param[j] * s.weight_decay + grad[j] };
+        let a = moment_1[j] * s.beta_1 + g * one_minus_beta_1;
+        let b = moment_2[j] * s.beta_2 + g * g * one_minus_beta_2;
+        let step = a * s.correction / (b.sqrt() + s.epsilon);
+        p[j] = param[j] - step * s.lr;
+        m1[j] = a;
+        m2[j] = b;
+    }
+}
+
+macro_rules! cpu_backend {
+    ($backend:ty) => {
+        impl AdamBackend for $backend {
+            fn adam_step(
+                param: FloatTensor<Self>,
+                grad: FloatTensor<Self>,
+                moment_1: FloatTensor<Self>,
+                moment_2: FloatTensor<Self>,
+                lr: f64,
+                beta_1: f64,
+                beta_2: f64,
+                weight_decay: f64,
+                correction: f64,
+                epsilon: f64,
+            ) -> FloatTensor<Self> {
+                let n = param.shape().num_elements();
+                on_host!($backend, [param, grad, moment_1, moment_2], [3, n], |T| {
+                    let s = AdamScalars {
+                        lr: T::from_f64(lr),
+                        beta_1: T::from_f64(beta_1),
+                        beta_2: T::from_f64(beta_2),
+                        weight_decay: T::from_f64(weight_decay),
+                        correction: T::from_f64(correction),
+                        epsilon: T::from_f64(epsilon),
+                    };
+                    adam_update(&T::host::<Self>(&param), &T::host::<Self>(&grad), &T::host::<Self>(&moment_1), &T::host::<Self>(&moment_2), s)
+                })
+            }
+        }
+    };
+}
+
+mod cpu_impls {
+    use super::*;
+    cpu_backend!(NdArray);
+    cpu_backend!(Flex);
+}
+
+/// Burn's primitives (the trait's default body).
+impl AdamBackend for CubeBackend {}
+
+/// The optimiser steps inner (non-differentiable) tensors; on `Autodiff` the default body
+/// composes differentiable primitives.
+impl<B: AdamBackend, C: CheckpointStrategy> AdamBackend for Autodiff<B, C> {}
+
+/// [`FusedAdam`]'s settings: [`AdamConfig`]'s fields, with its defaults.
+#[derive(Config, Debug)]
+pub struct FusedAdamConfig {
+    #[config(default = 0.9)]
+    pub beta_1: f32,
+    #[config(default = 0.999)]
+    pub beta_2: f32,
+    #[config(default = 1e-5)]
+    pub epsilon: f32,
+    #[config(default = false)]
+    pub amsgrad: bool,
+    pub weight_decay: Option<WeightDecayConfig>,
+    pub grad_clipping: Option<GradientClippingConfig>,
+}
+
+impl FusedAdamConfig {
+    /// The optimiser, ready for `step`.
+    pub fn init(&self) -> ModuleOptimizer {
+        let burn_adam = AdamConfig::new()
+            .with_beta_1(self.beta_1)
+            .with_beta_2(self.beta_2)
+            .with_epsilon(self.epsilon)
+            .with_amsgrad(self.amsgrad)
+            .with_weight_decay(self.weight_decay.clone())
+            .build();
+        let adam = FusedAdam {
+            beta_1: self.beta_1,
+            beta_2: self.beta_2,
+            epsilon: self.epsilon,
+            weight_decay: self.weight_decay.as_ref().map_or(0.0, |w| w.penalty),
+            amsgrad: self.amsgrad,
+            burn_adam,
+        };
+        let mut optim = ModuleOptimizer::from(adam);
+        if let Some(clipping) = &self.grad_clipping {
+            optim = optim.with_grad_clipping(clipping.init());
+        }
+        optim
+    }
+}
+
+/// Adam whose step is one [`AdamBackend::adam_step`] per parameter (Burn's `Adam` for AMSGrad).
+#[derive(Clone)]
+pub struct FusedAdam {
+    beta_1: f32,
+    beta_2: f32,
+    epsilon: f32,
+    weight_decay: f32,
+    amsgrad: bool,
+    burn_adam: Adam,
+}
+
+impl Optimizer for FusedAdam {
+    type State<const D: usize> = AdamState<D>;
+
+    fn step<const D: usize>(&self, lr: LearningRate, tensor: Tensor<D>, grad: Tensor<D>, state: Option<Self::State<D>>) -> (Tensor<D>, Option<Self::State<D>>) {
+        if self.amsgrad {
+            return self.burn_adam.step(lr, tensor, grad, state);
+        }
+        let shape = tensor.shape();
+        let n = shape.num_elements();
+        let flat = |t: Tensor<D>| t.reshape([n]);
+        let (time, moment_1, moment_2) = match state {
+            Some(s) => (s.momentum.time + 1, flat(s.momentum.moment_1), flat(s.momentum.moment_2)),
+            // Zero moments of the parameter's dtype: the first step's sums are then Burn's.
+            None => (1, flat(tensor.zeros_like()), flat(tensor.zeros_like())),
+        };
+        // Burn's scalars, in f32 as Burn computes them.
+        let t = time as i32;
+        let bias_correction_2 = (1.0 - self.beta_2.powi(t)).sqrt();
+        let correction = bias_correction_2 / (1.0 - self.beta_1.powi(t));
+        let out = <Dispatch as AdamBackend>::adam_step(
+            flat(tensor).into_dispatch(),
+            flat(grad).into_dispatch(),
+            moment_1.into_dispatch(),
+            moment_2.into_dispatch(),
+            lr as f32 as f64,
+            self.beta_1 as f64,
+            self.beta_2 as f64,
+            self.weight_decay as f64,
+            correction as f64,
+            (self.epsilon * bias_correction_2) as f64,
+        );
+        let out: Tensor<2> = Tensor::from_dispatch(out);
+        let row = |i: usize| out.clone().slice([Slice::from(i..i + 1), Slice::from(0..n)]).reshape(shape.clone());
+        let momentum = AdaptiveMomentumState::new(time, row(1), row(2));
+        (row(0), Some(AdamState::new(momentum)))
+    }
+
+    fn to_device<const D: usize>(state: Self::State<D>, device: &Device) -> Self::State<D> {
+        <Adam as Optimizer>::to_device(state, device)
+    }
+}
