@@ -48,19 +48,37 @@ pub trait AdamBackend: Backend {
         correction: f64,
         epsilon: f64,
     ) -> FloatTensor<Self> {
-        let n = param.shape()[0];
-        let s = |v: f64| Scalar::Float(v);
-        let grad = match weight_decay {
-            0.0 => grad,
-            wd => Self::float_add(Self::float_mul_scalar(param.clone(), s(wd)), grad),
-        };
-        let moment_1 = Self::float_add(Self::float_mul_scalar(moment_1, s(beta_1)), Self::float_mul_scalar(grad.clone(), s((1.0 - beta_1 as f32) as f64)));
-        let moment_2 = Self::float_add(Self::float_mul_scalar(moment_2, s(beta_2)), Self::float_mul_scalar(Self::float_mul(grad.clone(), grad), s((1.0 - beta_2 as f32) as f64)));
-        let step = Self::float_div(Self::float_mul_scalar(moment_1.clone(), s(correction)), Self::float_add_scalar(Self::float_sqrt(moment_2.clone()), s(epsilon)));
-        let param = Self::float_sub(param, Self::float_mul_scalar(step, s(lr)));
-        let row = |t: FloatTensor<Self>| Self::float_reshape(t, Shape::new([1, n]));
-        Self::float_cat(vec![row(param), row(moment_1), row(moment_2)], 0)
+        composed::<Self>(param, grad, moment_1, moment_2, lr, beta_1, beta_2, weight_decay, correction, epsilon)
     }
+}
+
+/// [`AdamBackend::adam_step`] composed of Burn's primitives: what backends without a kernel of
+/// their own run.
+#[allow(clippy::too_many_arguments)]
+pub fn composed<B: Backend>(
+    param: FloatTensor<B>,
+    grad: FloatTensor<B>,
+    moment_1: FloatTensor<B>,
+    moment_2: FloatTensor<B>,
+    lr: f64,
+    beta_1: f64,
+    beta_2: f64,
+    weight_decay: f64,
+    correction: f64,
+    epsilon: f64,
+) -> FloatTensor<B> {
+    let n = param.shape()[0];
+    let s = |v: f64| Scalar::Float(v);
+    let grad = match weight_decay {
+        0.0 => grad,
+        wd => B::float_add(B::float_mul_scalar(param.clone(), s(wd)), grad),
+    };
+    let moment_1 = B::float_add(B::float_mul_scalar(moment_1, s(beta_1)), B::float_mul_scalar(grad.clone(), s((1.0 - beta_1 as f32) as f64)));
+    let moment_2 = B::float_add(B::float_mul_scalar(moment_2, s(beta_2)), B::float_mul_scalar(B::float_mul(grad.clone(), grad), s((1.0 - beta_2 as f32) as f64)));
+    let step = B::float_div(B::float_mul_scalar(moment_1.clone(), s(correction)), B::float_add_scalar(B::float_sqrt(moment_2.clone()), s(epsilon)));
+    let param = B::float_sub(param, B::float_mul_scalar(step, s(lr)));
+    let row = |t: FloatTensor<B>| B::float_reshape(t, Shape::new([1, n]));
+    B::float_cat(vec![row(param), row(moment_1), row(moment_2)], 0)
 }
 
 /// The scalars of one step, in the parameter's type.
@@ -155,8 +173,28 @@ mod cpu_impls {
     cpu_backend!(Flex);
 }
 
-/// Burn's primitives (the trait's default body).
-impl AdamBackend for CubeBackend {}
+/// The f32 kernel of [`crate::cube`], Burn's primitives for other dtypes.
+impl AdamBackend for CubeBackend {
+    fn adam_step(
+        param: FloatTensor<Self>,
+        grad: FloatTensor<Self>,
+        moment_1: FloatTensor<Self>,
+        moment_2: FloatTensor<Self>,
+        lr: f64,
+        beta_1: f64,
+        beta_2: f64,
+        weight_decay: f64,
+        correction: f64,
+        epsilon: f64,
+    ) -> FloatTensor<Self> {
+        if !crate::cube::runs(&param) {
+            return composed::<Self>(param, grad, moment_1, moment_2, lr, beta_1, beta_2, weight_decay, correction, epsilon);
+        }
+        let s = |v: f64| v as f32;
+        let scalars = AdamScalars { lr: s(lr), beta_1: s(beta_1), beta_2: s(beta_2), weight_decay: s(weight_decay), correction: s(correction), epsilon: s(epsilon) };
+        crate::cube::adam_step(param, grad, moment_1, moment_2, scalars)
+    }
+}
 
 /// The optimiser steps inner (non-differentiable) tensors; on `Autodiff` the default body
 /// composes differentiable primitives.

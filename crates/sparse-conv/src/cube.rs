@@ -385,6 +385,43 @@ fn sum_slices_kernel<F: Float, N: Size>(partial: &[Vector<F, N>], out: &mut [Vec
     out[i] = sum;
 }
 
+/// One Adam step per element ([`crate::adam`]'s arithmetic): `out = [θ'; m₁'; m₂']`, each `len`.
+#[cube(launch_unchecked)]
+#[allow(clippy::too_many_arguments)]
+fn adam_kernel(
+    param: &[f32],
+    grad: &[f32],
+    moment_1: &[f32],
+    moment_2: &[f32],
+    out: &mut [f32],
+    len: usize,
+    lr: f32,
+    beta_1: f32,
+    one_minus_beta_1: f32,
+    beta_2: f32,
+    one_minus_beta_2: f32,
+    weight_decay: f32,
+    correction: f32,
+    epsilon: f32,
+    #[comptime] decay: bool,
+) {
+    let i = ABSOLUTE_POS;
+    if i >= len {
+        terminate!();
+    }
+    let p = param[i];
+    let mut g = grad[i];
+    if decay {
+        g += p * weight_decay;
+    }
+    let a = moment_1[i] * beta_1 + g * one_minus_beta_1;
+    let b = moment_2[i] * beta_2 + g * g * one_minus_beta_2;
+    let step = a * correction / (f32::sqrt(b) + epsilon);
+    out[i] = p - step * lr;
+    out[len + i] = a;
+    out[2 * len + i] = b;
+}
+
 /// One side's gather table on a device.
 struct GatherTables {
     table: Handle,
@@ -635,4 +672,42 @@ pub(crate) fn weight_grad(features: CubeTensor, grad_out: CubeTensor, map: &Kern
 /// Whether the kernels here handle tensors of this dtype.
 pub(crate) fn runs(t: &CubeTensor) -> bool {
     t.dtype() == DType::F32
+}
+
+/// One Adam step of a flat f32 parameter on a cube device, `[3, n]` (see [`crate::adam`]).
+pub(crate) fn adam_step(param: CubeTensor, grad: CubeTensor, moment_1: CubeTensor, moment_2: CubeTensor, s: crate::adam::AdamScalars<f32>) -> CubeTensor {
+    let [param, grad, moment_1, moment_2] = [param, grad, moment_1, moment_2].map(contiguous);
+    let len = param.meta.num_elements();
+    let out = empty_f32(&param, Shape::new([3, len]));
+    if len == 0 {
+        return out;
+    }
+    let dim = CubeDim::new_1d(256);
+    let count = CubeCount::Static(len.div_ceil(256) as u32, 1, 1);
+    let buffer = |t: &CubeTensor| vectors(t, 1);
+    // Safety: the kernel reads `len` elements of each input and writes `3 · len` of `out`, the
+    // buffers' sizes.
+    unsafe {
+        adam_kernel::launch_unchecked(
+            &param.client,
+            count,
+            dim,
+            buffer(&param),
+            buffer(&grad),
+            buffer(&moment_1),
+            buffer(&moment_2),
+            buffer(&out),
+            len,
+            s.lr,
+            s.beta_1,
+            1.0 - s.beta_1,
+            s.beta_2,
+            1.0 - s.beta_2,
+            s.weight_decay,
+            s.correction,
+            s.epsilon,
+            s.weight_decay != 0.0,
+        );
+    }
+    out
 }
