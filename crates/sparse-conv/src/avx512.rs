@@ -439,6 +439,107 @@ pub fn weight_grad(x: &[f32], c_in: usize, grad_out: &[f32], c_out: usize, pairs
     unsafe { assume_init(grad) }
 }
 
+/// Rows per block of the batch-norm sums: as [`crate::cpu_norm`]'s blocks, so the sums are its
+/// bits.
+const NORM_BLOCK_ROWS: usize = 16;
+
+/// Adds the two block sums (16 lanes of f32) into the f64 totals at `t1`, `t2` (`lanes` real).
+///
+/// # Safety
+/// AVX-512F; `t1`, `t2` writable for `lanes ≤ 16` f64.
+#[inline(always)]
+unsafe fn add_to_totals(s1: __m512, s2: __m512, t1: *mut f64, t2: *mut f64, lanes: usize) {
+    unsafe {
+        for (s, t) in [(s1, t1), (s2, t2)] {
+            // Lanes 0–7 and 8–15 widened to f64.
+            let halves = [_mm512_cvtps_pd(_mm512_castps512_ps256(s)), _mm512_cvtps_pd(_mm512_castps512_ps256(_mm512_shuffle_f32x4::<0b01_00_11_10>(s, s)))];
+            for (h, half) in halves.into_iter().enumerate() {
+                let n = lanes.saturating_sub(8 * h).min(8);
+                let m = ((1u32 << n) - 1) as __mmask8;
+                let p = t.add(8 * h);
+                _mm512_mask_storeu_pd(p, m, _mm512_add_pd(_mm512_maskz_loadu_pd(m, p), half));
+            }
+        }
+    }
+}
+
+/// [`crate::cpu_norm`]'s channel statistics sums over `x`'s rows (`c` channels): `[Σ d; Σ d²]`
+/// with `d = x − shift`, in blocks of 16 rows summed in f32 then added in f64, as the general
+/// loops do, so the same bits.
+pub fn stats_sums(x: &[f32], c: usize, shift: &[f32]) -> Vec<f64> {
+    assert!(available(), "AVX-512F kernels called on a CPU without AVX-512F");
+    assert!(shift.len() == c && x.len() % c == 0, "rows of {c} channels");
+    let mut total = vec![0.0f64; 2 * c];
+    // SAFETY: AVX-512F; the loops stay inside x, shift and total.
+    unsafe { stats_sums_avx512(x, c, shift, &mut total) };
+    total
+}
+
+#[target_feature(enable = "avx512f")]
+unsafe fn stats_sums_avx512(x: &[f32], c: usize, shift: &[f32], total: &mut [f64]) {
+    unsafe {
+        let n = x.len() / c;
+        let (x, shift, total) = (x.as_ptr(), shift.as_ptr(), total.as_mut_ptr());
+        for b0 in (0..n).step_by(NORM_BLOCK_ROWS) {
+            let b1 = (b0 + NORM_BLOCK_ROWS).min(n);
+            for j0 in (0..c).step_by(16) {
+                let m = mask(c - j0, 0);
+                let k = _mm512_maskz_loadu_ps(m, shift.add(j0));
+                let (mut s1, mut s2) = (_mm512_setzero_ps(), _mm512_setzero_ps());
+                for r in b0..b1 {
+                    let d = _mm512_sub_ps(_mm512_maskz_loadu_ps(m, x.add(r * c + j0)), k);
+                    s1 = _mm512_add_ps(s1, d);
+                    s2 = _mm512_add_ps(s2, _mm512_mul_ps(d, d));
+                }
+                add_to_totals(s1, s2, total.add(j0), total.add(c + j0), (c - j0).min(16));
+            }
+        }
+    }
+}
+
+/// [`crate::cpu_norm`]'s batch-norm parameter-gradient sums over the rows of `x` and `g`:
+/// `[Σ dz·(x − mean); Σ dz]`, `dz = g` masked where `x·a + b ≤ 0` (with `relu`); blocks as
+/// [`stats_sums`], the same bits as the general loops.
+#[allow(clippy::too_many_arguments)]
+pub fn param_sums(x: &[f32], g: &[f32], c: usize, a: &[f32], b: &[f32], mean: &[f32], relu: bool) -> Vec<f64> {
+    assert!(available(), "AVX-512F kernels called on a CPU without AVX-512F");
+    assert!(a.len() == c && b.len() == c && mean.len() == c && x.len() % c == 0 && g.len() == x.len(), "rows of {c} channels");
+    let mut total = vec![0.0f64; 2 * c];
+    // SAFETY: AVX-512F; the loops stay inside the slices.
+    unsafe { param_sums_avx512(x, g, c, a, b, mean, relu, &mut total) };
+    total
+}
+
+#[target_feature(enable = "avx512f")]
+#[allow(clippy::too_many_arguments)]
+unsafe fn param_sums_avx512(x: &[f32], g: &[f32], c: usize, a: &[f32], b: &[f32], mean: &[f32], relu: bool, total: &mut [f64]) {
+    unsafe {
+        let n = x.len() / c;
+        let (x, g, total) = (x.as_ptr(), g.as_ptr(), total.as_mut_ptr());
+        for b0 in (0..n).step_by(NORM_BLOCK_ROWS) {
+            let b1 = (b0 + NORM_BLOCK_ROWS).min(n);
+            for j0 in (0..c).step_by(16) {
+                let m = mask(c - j0, 0);
+                let (va, vb, vmean) = (_mm512_maskz_loadu_ps(m, a.as_ptr().add(j0)), _mm512_maskz_loadu_ps(m, b.as_ptr().add(j0)), _mm512_maskz_loadu_ps(m, mean.as_ptr().add(j0)));
+                let (mut dgamma, mut dbeta) = (_mm512_setzero_ps(), _mm512_setzero_ps());
+                for r in b0..b1 {
+                    let v = _mm512_maskz_loadu_ps(m, x.add(r * c + j0));
+                    let mut dz = _mm512_maskz_loadu_ps(m, g.add(r * c + j0));
+                    if relu {
+                        // z = x·a + b rounded twice (no FMA), as the forward computes it; a NaN z
+                        // compares false and keeps its gradient.
+                        let z = _mm512_add_ps(_mm512_mul_ps(v, va), vb);
+                        dz = _mm512_maskz_mov_ps(!_mm512_cmp_ps_mask::<_CMP_LE_OQ>(z, _mm512_setzero_ps()), dz);
+                    }
+                    dbeta = _mm512_add_ps(dbeta, dz);
+                    dgamma = _mm512_add_ps(dgamma, _mm512_mul_ps(dz, _mm512_sub_ps(v, vmean)));
+                }
+                add_to_totals(dgamma, dbeta, total.add(j0), total.add(c + j0), (c - j0).min(16));
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

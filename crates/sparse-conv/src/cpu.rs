@@ -49,6 +49,18 @@ pub trait Element:
         None
     }
 
+    /// The sums of [`crate::cpu_norm::channel_stats`] over a chunk of rows by a kernel specific
+    /// to this type and CPU, where one runs (the same bits as the general loops).
+    fn stats_sums_native(_x: &[Self], _c: usize, _shift: &[Self]) -> Option<Vec<f64>> {
+        None
+    }
+
+    /// The sums of [`crate::cpu_norm::param_grads`] over a chunk of rows, likewise.
+    #[allow(clippy::too_many_arguments)]
+    fn param_sums_native(_x: &[Self], _g: &[Self], _c: usize, _a: &[Self], _b: &[Self], _mean: &[Self], _relu: bool) -> Option<Vec<f64>> {
+        None
+    }
+
     /// [`pair_conv`] by a kernel specific to this type and CPU, where one runs.
     #[allow(clippy::too_many_arguments)]
     fn pair_conv_native(
@@ -83,6 +95,16 @@ impl Element for f32 {
     #[cfg(target_arch = "x86_64")]
     fn weight_grad_native(x: &[f32], c_in: usize, grad_out: &[f32], c_out: usize, pairs: &OffsetPairs) -> Option<Vec<f32>> {
         crate::avx512::available().then(|| crate::avx512::weight_grad(x, c_in, grad_out, c_out, pairs))
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    fn stats_sums_native(x: &[f32], c: usize, shift: &[f32]) -> Option<Vec<f64>> {
+        crate::avx512::available().then(|| crate::avx512::stats_sums(x, c, shift))
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    fn param_sums_native(x: &[f32], g: &[f32], c: usize, a: &[f32], b: &[f32], mean: &[f32], relu: bool) -> Option<Vec<f64>> {
+        crate::avx512::available().then(|| crate::avx512::param_sums(x, g, c, a, b, mean, relu))
     }
 
     #[cfg(target_arch = "x86_64")]

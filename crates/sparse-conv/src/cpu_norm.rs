@@ -34,22 +34,26 @@ pub fn channel_stats<T: Element>(x: &[T], c: usize) -> Vec<T> {
     // cancellation when a channel's mean is large against its spread.
     let shift = &x[..c];
     let shift_lanes = lane_groups(shift);
-    let sums = channel_sums(x.par_chunks(CHUNK_ROWS * c).map(|rows| {
-        block_sums(c, rows, rows, |group, x, _, s1, s2| {
-            let k = &shift_lanes[group];
-            for l in 0..LANES {
-                let d = x[l] - k[l];
-                s1[l] += d;
-                s2[l] += d * d;
-            }
-        })
-    }));
+    let sums = channel_sums(x.par_chunks(CHUNK_ROWS * c).map(|rows| T::stats_sums_native(rows, c, shift).unwrap_or_else(|| stats_sums(rows, c, &shift_lanes))));
     let (s1, s2) = sums.split_at(c);
     let inv_n = 1.0 / n as f64;
     let mut out = Vec::with_capacity(2 * c);
     out.extend(s1.iter().zip(shift).map(|(s, k)| T::from_f64(k.to_f64() + s * inv_n)));
     out.extend(s1.iter().zip(s2).map(|(s1, s2)| T::from_f64((s2 * inv_n - (s1 * inv_n).powi(2)).max(0.0))));
     out
+}
+
+/// `[Σ (x − shift); Σ (x − shift)²]` per channel over `rows`: [`channel_stats`]' sums over a
+/// chunk, by the general loops.
+fn stats_sums<T: Element>(rows: &[T], c: usize, shift_lanes: &[[T; LANES]]) -> Vec<f64> {
+    block_sums(c, rows, rows, |group, x, _, s1, s2| {
+        let k = &shift_lanes[group];
+        for l in 0..LANES {
+            let d = x[l] - k[l];
+            s1[l] += d;
+            s2[l] += d * d;
+        }
+    })
 }
 
 /// Rows summed per block in the element type before the block's sums join the f64 totals:
@@ -280,24 +284,31 @@ pub fn param_grads<T: Element>(x: &[T], grad_out: &[T], stats: &[T], gamma: &[T]
     if c == 0 {
         return Vec::new();
     }
-    let (a_lanes, b_lanes, mean_lanes) = (lane_groups(&a), lane_groups(&b), lane_groups(&stats[..c]));
+    let lanes = [lane_groups(&a), lane_groups(&b), lane_groups(&stats[..c])];
     let sums = channel_sums(x.par_chunks(CHUNK_ROWS * c).zip(grad_out.par_chunks(CHUNK_ROWS * c)).map(|(rows, grads)| {
-        let params = |group: usize| (&a_lanes[group], &b_lanes[group], &mean_lanes[group]);
-        // One small closure per case, each inlined whole into the vector loop.
-        if relu {
-            block_sums(c, rows, grads, |group, row, grad, dgamma, dbeta| {
-                let (a, b, mean) = params(group);
-                param_lanes::<T, true>(row, grad, a, b, mean, dgamma, dbeta)
-            })
-        } else {
-            block_sums(c, rows, grads, |group, row, grad, dgamma, dbeta| {
-                let (a, b, mean) = params(group);
-                param_lanes::<T, false>(row, grad, a, b, mean, dgamma, dbeta)
-            })
-        }
+        T::param_sums_native(rows, grads, c, &a, &b, &stats[..c], relu).unwrap_or_else(|| param_sums(rows, grads, c, &lanes, relu))
     }));
     let (dgamma, dbeta) = sums.split_at(c);
     dgamma.iter().zip(&inv_std).map(|(g, s)| T::from_f64(g * s)).chain(dbeta.iter().map(|&b| T::from_f64(b))).collect()
+}
+
+/// `[Σ dz·(x − mean); Σ dz]` per channel over `rows` and their gradients `grads`:
+/// [`param_grads`]' sums over a chunk, by the general loops; `lanes` are `a`, `b` and the mean
+/// as lane groups.
+fn param_sums<T: Element>(rows: &[T], grads: &[T], c: usize, lanes: &[Vec<[T; LANES]>; 3], relu: bool) -> Vec<f64> {
+    let params = |group: usize| (&lanes[0][group], &lanes[1][group], &lanes[2][group]);
+    // One small closure per case, each inlined whole into the vector loop.
+    if relu {
+        block_sums(c, rows, grads, |group, row, grad, dgamma, dbeta| {
+            let (a, b, mean) = params(group);
+            param_lanes::<T, true>(row, grad, a, b, mean, dgamma, dbeta)
+        })
+    } else {
+        block_sums(c, rows, grads, |group, row, grad, dgamma, dbeta| {
+            let (a, b, mean) = params(group);
+            param_lanes::<T, false>(row, grad, a, b, mean, dgamma, dbeta)
+        })
+    }
 }
 
 /// `dy` through the ReLU's mask: zero where `z = x·a + b ≤ 0`.
@@ -414,6 +425,26 @@ mod tests {
         let x: Vec<f32> = (0..5000).map(|i| 1.0e4 + (i % 2) as f32).collect();
         let stats = channel_stats(&x, 1);
         assert!((stats[1] - 0.25).abs() < 1e-6, "var {}", stats[1]);
+    }
+
+    /// The AVX-512 sums are the general loops' bits: partial lane groups (37 channels) and
+    /// blocks (1005 rows), a single group, three channels; with and without ReLU.
+    #[test]
+    fn native_sums_are_the_general_loops_bits() {
+        for &(n, c) in &[(1005, 37), (64, 16), (33, 3)] {
+            let x: Vec<f32> = (0..n * c).map(|i| ((i * 7919 % 1000) as f32 - 400.0) / 300.0).collect();
+            let g: Vec<f32> = (0..n * c).map(|i| ((i * 104729 % 997) as f32 - 500.0) / 500.0).collect();
+            let shift = &x[..c];
+            let Some(native) = f32::stats_sums_native(&x, c, shift) else { return };
+            assert!(native == stats_sums(&x, c, &lane_groups(shift)), "channel sums, {n} × {c}");
+            let stats = channel_stats(&x, c);
+            let (a, b): (Vec<f32>, Vec<f32>) = (0..c).map(|j| (0.5 + j as f32 * 0.1, j as f32 * 0.05 - 0.3)).unzip();
+            let lanes = [lane_groups(&a), lane_groups(&b), lane_groups(&stats[..c])];
+            for relu in [true, false] {
+                let native = f32::param_sums_native(&x, &g, c, &a, &b, &stats[..c], relu).unwrap();
+                assert!(native == param_sums(&x, &g, c, &lanes, relu), "parameter sums, {n} × {c}, ReLU {relu}");
+            }
+        }
     }
 
     /// Any chunking of rows over threads gives the same bits.
