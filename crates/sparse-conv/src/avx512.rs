@@ -468,7 +468,7 @@ unsafe fn add_to_totals(s1: __m512, s2: __m512, t1: *mut f64, t2: *mut f64, lane
 /// loops do, so the same bits.
 pub fn stats_sums(x: &[f32], c: usize, shift: &[f32]) -> Vec<f64> {
     assert!(available(), "AVX-512F kernels called on a CPU without AVX-512F");
-    assert!(shift.len() == c && x.len() % c == 0, "rows of {c} channels");
+    assert!(shift.len() == c && x.len().is_multiple_of(c), "rows of {c} channels");
     let mut total = vec![0.0f64; 2 * c];
     // SAFETY: AVX-512F; the loops stay inside x, shift and total.
     unsafe { stats_sums_avx512(x, c, shift, &mut total) };
@@ -503,7 +503,7 @@ unsafe fn stats_sums_avx512(x: &[f32], c: usize, shift: &[f32], total: &mut [f64
 #[allow(clippy::too_many_arguments)]
 pub fn param_sums(x: &[f32], g: &[f32], c: usize, a: &[f32], b: &[f32], mean: &[f32], relu: bool) -> Vec<f64> {
     assert!(available(), "AVX-512F kernels called on a CPU without AVX-512F");
-    assert!(a.len() == c && b.len() == c && mean.len() == c && x.len() % c == 0 && g.len() == x.len(), "rows of {c} channels");
+    assert!(a.len() == c && b.len() == c && mean.len() == c && x.len().is_multiple_of(c) && g.len() == x.len(), "rows of {c} channels");
     let mut total = vec![0.0f64; 2 * c];
     // SAFETY: AVX-512F; the loops stay inside the slices.
     unsafe { param_sums_avx512(x, g, c, a, b, mean, relu, &mut total) };
