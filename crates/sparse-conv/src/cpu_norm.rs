@@ -86,26 +86,10 @@ fn lane_groups<T: Element>(v: &[T]) -> Vec<[T; LANES]> {
 /// into the block's sums in `T`, which are added into f64 totals block by block. Each group's
 /// sums stay in registers over the block's rows; every channel still sums its rows in row order,
 /// as one row at a time would. Returns `[s1.., s2..]`.
-fn block_sums<T: Element, F: LaneSums<T>>(c: usize, x: &[T], y: &[T], add: F) -> Vec<f64> {
-    #[cfg(target_arch = "x86_64")]
-    if crate::avx512::available() {
-        // A closure passed to `vectorized` is not inlined reliably; this body is.
-        #[target_feature(enable = "avx512f")]
-        unsafe fn with_avx512<T: Element, F: LaneSums<T>>(c: usize, x: &[T], y: &[T], add: &F) -> Vec<f64> {
-            block_sums_body(c, x, y, add)
-        }
-        // SAFETY: the CPU has AVX-512F.
-        return unsafe { with_avx512(c, x, y, &add) };
-    }
-    block_sums_body(c, x, y, &add)
-}
-
-/// What [`block_sums`] accumulates: one row's lane group into the block's two sums.
-trait LaneSums<T>: Fn(usize, &[T; LANES], &[T; LANES], &mut [T; LANES], &mut [T; LANES]) {}
-impl<T, F: Fn(usize, &[T; LANES], &[T; LANES], &mut [T; LANES], &mut [T; LANES])> LaneSums<T> for F {}
-
-#[inline(always)]
-fn block_sums_body<T: Element, F: LaneSums<T>>(c: usize, x: &[T], y: &[T], add: &F) -> Vec<f64> {
+///
+/// On AVX-512 CPUs f32 runs kernels of its own ([`Element::stats_sums_native`]), so these loops
+/// serve f64 and other CPUs.
+fn block_sums<T: Element>(c: usize, x: &[T], y: &[T], add: impl Fn(usize, &[T; LANES], &[T; LANES], &mut [T; LANES], &mut [T; LANES])) -> Vec<f64> {
     let n = x.len() / c;
     let groups = c.div_ceil(LANES);
     // The f64 totals by lane group too, so that adding a block's sums is vector code as well.
