@@ -4,8 +4,9 @@
 //! Why not Burn's `Adam` as is: its step is about a dozen element-wise tensor ops per parameter
 //! (scaled moments, a square, a square root, the bias corrections), each a pass over the
 //! parameter into a new buffer; on the CPU backends that is ~0.11 s of a 2.5 s MinkUNet training
-//! step (21.7 M parameters). Here the CPU backends run [`adam_update`], one pass; other backends
-//! compose the same math from Burn's primitives (the trait's default body). The state is Burn's
+//! step (21.7 M parameters). Here the CPU backends run [`adam_update`], one pass, and GPUs (the
+//! cubecl backends, f32) one kernel per parameter; anything else composes the same math from
+//! Burn's primitives ([`composed`]). The state is Burn's
 //! [`AdamState`], so either optimiser resumes the other's checkpoints, and AMSGrad (which keeps a
 //! third moment) runs Burn's own step.
 //!
