@@ -7,8 +7,8 @@
 //! step (21.7 M parameters). Here the CPU backends run [`adam_update`], one pass, and GPUs (the
 //! cubecl backends, f32) one kernel per parameter; anything else composes the same math from
 //! Burn's primitives ([`composed`]). The state is Burn's
-//! [`AdamState`], so either optimiser resumes the other's checkpoints, and AMSGrad (which keeps a
-//! third moment) runs Burn's own step.
+//! [`AdamState`], so either optimiser resumes the other's checkpoints. With AMSGrad the step
+//! divides by the running maximum of m₂, kept in the state as Burn keeps it.
 //!
 //! The arithmetic is Burn's, operation for operation, in the parameter's type: with `g` the
 //! gradient (plus `λ·θ` with weight decay λ), `m₁ = β₁·m₁ + (1 − β₁)·g`,
@@ -22,7 +22,7 @@ use burn::backend::{Autodiff, Backend, Dispatch, Flex, NdArray, Scalar, TensorMe
 use burn::config::Config;
 use burn::grad_clipping::GradientClippingConfig;
 use burn::optim::decay::WeightDecayConfig;
-use burn::optim::{Adam, AdamConfig, AdamState, AdaptiveMomentumState, LearningRate, ModuleOptimizer, Optimizer};
+use burn::optim::{Adam, AdamState, AdaptiveMomentumState, LearningRate, ModuleOptimizer, Optimizer};
 use burn::tensor::{Device, Shape, Slice, Tensor};
 use burn_cubecl::CubeBackend;
 use rayon::prelude::*;
@@ -34,14 +34,18 @@ use crate::cpu::{Element, SyncPtr, assume_init, scratch, vectorized};
 #[backend_extension(NdArray, Flex, Cube, Fusion, Autodiff)]
 pub trait AdamBackend: Backend {
     /// `[θ'; m₁'; m₂']` as `[3, n]`, from the flat `[n]` parameter `θ`, its gradient and moments
-    /// (zeros before the first step). The scalars are [`AdamScalars`]' fields.
+    /// (zeros before the first step); with `amsgrad` `[θ'; m₁'; m₂'; max(m̂₂, m₂')]` as `[4, n]`
+    /// from the running maximum `max_moment_2` (ignored without). The scalars are
+    /// [`AdamScalars`]' fields.
     #[allow(clippy::too_many_arguments)]
-    #[fusion(dtype = param, shape = Shape::new([3, param[0]]))]
+    #[fusion(dtype = param, shape = Shape::new([3 + usize::from(*amsgrad), param[0]]))]
     fn adam_step(
         param: FloatTensor<Self>,
         grad: FloatTensor<Self>,
         moment_1: FloatTensor<Self>,
         moment_2: FloatTensor<Self>,
+        max_moment_2: FloatTensor<Self>,
+        amsgrad: bool,
         lr: f64,
         beta_1: f64,
         beta_2: f64,
@@ -49,7 +53,7 @@ pub trait AdamBackend: Backend {
         correction: f64,
         epsilon: f64,
     ) -> FloatTensor<Self> {
-        composed::<Self>(param, grad, moment_1, moment_2, lr, beta_1, beta_2, weight_decay, correction, epsilon)
+        composed::<Self>(param, grad, moment_1, moment_2, max_moment_2, amsgrad, lr, beta_1, beta_2, weight_decay, correction, epsilon)
     }
 }
 
@@ -61,6 +65,8 @@ pub fn composed<B: Backend>(
     grad: FloatTensor<B>,
     moment_1: FloatTensor<B>,
     moment_2: FloatTensor<B>,
+    max_moment_2: FloatTensor<B>,
+    amsgrad: bool,
     lr: f64,
     beta_1: f64,
     beta_2: f64,
@@ -76,10 +82,18 @@ pub fn composed<B: Backend>(
     };
     let moment_1 = B::float_add(B::float_mul_scalar(moment_1, s(beta_1)), B::float_mul_scalar(grad.clone(), s((1.0 - beta_1 as f32) as f64)));
     let moment_2 = B::float_add(B::float_mul_scalar(moment_2, s(beta_2)), B::float_mul_scalar(B::float_mul(grad.clone(), grad), s((1.0 - beta_2 as f32) as f64)));
-    let step = B::float_div(B::float_mul_scalar(moment_1.clone(), s(correction)), B::float_add_scalar(B::float_sqrt(moment_2.clone()), s(epsilon)));
+    // AMSGrad divides by the running maximum of m₂ (Burn's `max_pair`: the new m₂ where the old
+    // maximum is lower).
+    let max_moment_2 = amsgrad.then(|| {
+        let bool_dtype = burn::backend::get_or_init_device_settings::<B>(&param.device()).bool_dtype;
+        let lower = B::float_lower(max_moment_2.clone(), moment_2.clone(), bool_dtype);
+        B::float_mask_where(max_moment_2, lower, moment_2.clone())
+    });
+    let denominator = max_moment_2.clone().unwrap_or_else(|| moment_2.clone());
+    let step = B::float_div(B::float_mul_scalar(moment_1.clone(), s(correction)), B::float_add_scalar(B::float_sqrt(denominator), s(epsilon)));
     let param = B::float_sub(param, B::float_mul_scalar(step, s(lr)));
     let row = |t: FloatTensor<B>| B::float_reshape(t, Shape::new([1, n]));
-    B::float_cat(vec![row(param), row(moment_1), row(moment_2)], 0)
+    B::float_cat([param, moment_1, moment_2].into_iter().chain(max_moment_2).map(row).collect(), 0)
 }
 
 /// The scalars of one step, in the parameter's type.
@@ -99,37 +113,51 @@ pub struct AdamScalars<T> {
 /// Elements per parallel task.
 const CHUNK: usize = 1 << 15;
 
-/// One Adam step over slices: `[θ'.., m₁'.., m₂'..]` (see the module's formulas).
-pub fn adam_update<T: Element>(param: &[T], grad: &[T], moment_1: &[T], moment_2: &[T], s: AdamScalars<T>) -> Vec<T> {
+/// One Adam step over slices: `[θ'.., m₁'.., m₂'..]` (see the module's formulas); with
+/// `max_moment_2` (AMSGrad) also the new running maximum of m₂, which the step divides by.
+pub fn adam_update<T: Element>(param: &[T], grad: &[T], moment_1: &[T], moment_2: &[T], max_moment_2: Option<&[T]>, s: AdamScalars<T>) -> Vec<T> {
     let n = param.len();
-    assert!(grad.len() == n && moment_1.len() == n && moment_2.len() == n, "Adam's parameter, gradient and moments differ in size");
-    let mut out = scratch::<T>(3 * n);
+    assert!(grad.len() == n && moment_1.len() == n && moment_2.len() == n && max_moment_2.is_none_or(|m| m.len() == n), "Adam's parameter, gradient and moments differ in size");
+    let regions = 3 + max_moment_2.is_some() as usize;
+    let mut out = scratch::<T>(regions * n);
     let out_ptr = SyncPtr(out.as_mut_ptr().cast::<T>());
     let out_ptr = &out_ptr;
     (0..n.div_ceil(CHUNK)).into_par_iter().for_each(|chunk| {
         let range = chunk * CHUNK..((chunk + 1) * CHUNK).min(n);
         // SAFETY: the three regions of this chunk are written by this task only.
-        let (p, m1, m2) = unsafe {
-            let at = |region: usize| std::slice::from_raw_parts_mut(out_ptr.0.add(region * n + range.start), range.len());
-            (at(0), at(1), at(2))
-        };
-        vectorized(|| adam_chunk(&param[range.clone()], &grad[range.clone()], &moment_1[range.clone()], &moment_2[range.clone()], s, p, m1, m2));
+        let at = |region: usize| unsafe { std::slice::from_raw_parts_mut(out_ptr.0.add(region * n + range.start), range.len()) };
+        let (p, m1, m2) = (at(0), at(1), at(2));
+        let inputs = [param, grad, moment_1, moment_2].map(|v| &v[range.clone()]);
+        match max_moment_2 {
+            Some(max) => vectorized(|| adam_chunk::<T, true>(inputs, &max[range.clone()], s, [p, m1, m2, at(3)])),
+            None => vectorized(|| adam_chunk::<T, false>(inputs, &[], s, [p, m1, m2, &mut []])),
+        }
     });
-    // SAFETY: the chunks cover every element of the three regions.
+    // SAFETY: the chunks cover every element of every region.
     unsafe { assume_init(out) }
 }
 
+/// One chunk of [`adam_update`]: `out` is `[θ', m₁', m₂', max]` (`max` empty without AMSGRAD).
 #[inline(always)]
-#[allow(clippy::too_many_arguments)]
-fn adam_chunk<T: Element>(param: &[T], grad: &[T], moment_1: &[T], moment_2: &[T], s: AdamScalars<T>, p: &mut [T], m1: &mut [T], m2: &mut [T]) {
+fn adam_chunk<T: Element, const AMSGRAD: bool>(inputs: [&[T]; 4], max_moment_2: &[T], s: AdamScalars<T>, out: [&mut [T]; 4]) {
     let (one_minus_beta_1, one_minus_beta_2) = (T::ONE - s.beta_1, T::ONE - s.beta_2);
+    let [param, grad, moment_1, moment_2] = inputs;
     let n = param.len();
+    let [p, m1, m2, max] = out;
     let (grad, moment_1, moment_2, p, m1, m2) = (&grad[..n], &moment_1[..n], &moment_2[..n], &mut p[..n], &mut m1[..n], &mut m2[..n]);
+    let (max_moment_2, max) = if AMSGRAD { (&max_moment_2[..n], &mut max[..n]) } else { (max_moment_2, max) };
     for j in 0..n {
         let g = if s.weight_decay == T::ZERO { grad[j] } else { param[j] * s.weight_decay + grad[j] };
         let a = moment_1[j] * s.beta_1 + g * one_minus_beta_1;
         let b = moment_2[j] * s.beta_2 + g * g * one_minus_beta_2;
-        let step = a * s.correction / (b.sqrt() + s.epsilon);
+        let v = if AMSGRAD {
+            let v = if max_moment_2[j] < b { b } else { max_moment_2[j] };
+            max[j] = v;
+            v
+        } else {
+            b
+        };
+        let step = a * s.correction / (v.sqrt() + s.epsilon);
         p[j] = param[j] - step * s.lr;
         m1[j] = a;
         m2[j] = b;
@@ -144,6 +172,8 @@ macro_rules! cpu_backend {
                 grad: FloatTensor<Self>,
                 moment_1: FloatTensor<Self>,
                 moment_2: FloatTensor<Self>,
+                max_moment_2: FloatTensor<Self>,
+                amsgrad: bool,
                 lr: f64,
                 beta_1: f64,
                 beta_2: f64,
@@ -152,7 +182,7 @@ macro_rules! cpu_backend {
                 epsilon: f64,
             ) -> FloatTensor<Self> {
                 let n = param.shape().num_elements();
-                on_host!($backend, [param, grad, moment_1, moment_2], [3, n], |T| {
+                on_host!($backend, [param, grad, moment_1, moment_2, max_moment_2], [3 + amsgrad as usize, n], |T| {
                     let s = AdamScalars {
                         lr: T::from_f64(lr),
                         beta_1: T::from_f64(beta_1),
@@ -161,7 +191,8 @@ macro_rules! cpu_backend {
                         correction: T::from_f64(correction),
                         epsilon: T::from_f64(epsilon),
                     };
-                    adam_update(&T::host::<Self>(&param), &T::host::<Self>(&grad), &T::host::<Self>(&moment_1), &T::host::<Self>(&moment_2), s)
+                    let max = amsgrad.then(|| T::host::<Self>(&max_moment_2));
+                    adam_update(&T::host::<Self>(&param), &T::host::<Self>(&grad), &T::host::<Self>(&moment_1), &T::host::<Self>(&moment_2), max.as_deref(), s)
                 })
             }
         }
@@ -181,6 +212,8 @@ impl AdamBackend for CubeBackend {
         grad: FloatTensor<Self>,
         moment_1: FloatTensor<Self>,
         moment_2: FloatTensor<Self>,
+        max_moment_2: FloatTensor<Self>,
+        amsgrad: bool,
         lr: f64,
         beta_1: f64,
         beta_2: f64,
@@ -189,11 +222,11 @@ impl AdamBackend for CubeBackend {
         epsilon: f64,
     ) -> FloatTensor<Self> {
         if !crate::cube::runs(&param) {
-            return composed::<Self>(param, grad, moment_1, moment_2, lr, beta_1, beta_2, weight_decay, correction, epsilon);
+            return composed::<Self>(param, grad, moment_1, moment_2, max_moment_2, amsgrad, lr, beta_1, beta_2, weight_decay, correction, epsilon);
         }
         let s = |v: f64| v as f32;
         let scalars = AdamScalars { lr: s(lr), beta_1: s(beta_1), beta_2: s(beta_2), weight_decay: s(weight_decay), correction: s(correction), epsilon: s(epsilon) };
-        crate::cube::adam_step(param, grad, moment_1, moment_2, scalars)
+        crate::cube::adam_step(param, grad, moment_1, moment_2, amsgrad.then_some(max_moment_2), scalars)
     }
 }
 
@@ -219,20 +252,12 @@ pub struct FusedAdamConfig {
 impl FusedAdamConfig {
     /// The optimiser, ready for `step`.
     pub fn init(&self) -> ModuleOptimizer {
-        let burn_adam = AdamConfig::new()
-            .with_beta_1(self.beta_1)
-            .with_beta_2(self.beta_2)
-            .with_epsilon(self.epsilon)
-            .with_amsgrad(self.amsgrad)
-            .with_weight_decay(self.weight_decay.clone())
-            .build();
         let adam = FusedAdam {
             beta_1: self.beta_1,
             beta_2: self.beta_2,
             epsilon: self.epsilon,
             weight_decay: self.weight_decay.as_ref().map_or(0.0, |w| w.penalty),
             amsgrad: self.amsgrad,
-            burn_adam,
         };
         let mut optim = ModuleOptimizer::from(adam);
         if let Some(clipping) = &self.grad_clipping {
@@ -242,7 +267,7 @@ impl FusedAdamConfig {
     }
 }
 
-/// Adam whose step is one [`AdamBackend::adam_step`] per parameter (Burn's `Adam` for AMSGrad).
+/// Adam whose step is one [`AdamBackend::adam_step`] per parameter.
 #[derive(Clone)]
 pub struct FusedAdam {
     beta_1: f32,
@@ -250,24 +275,23 @@ pub struct FusedAdam {
     epsilon: f32,
     weight_decay: f32,
     amsgrad: bool,
-    burn_adam: Adam,
 }
 
 impl Optimizer for FusedAdam {
     type State<const D: usize> = AdamState<D>;
 
     fn step<const D: usize>(&self, lr: LearningRate, tensor: Tensor<D>, grad: Tensor<D>, state: Option<Self::State<D>>) -> (Tensor<D>, Option<Self::State<D>>) {
-        if self.amsgrad {
-            return self.burn_adam.step(lr, tensor, grad, state);
-        }
         let shape = tensor.shape();
         let n = shape.num_elements();
         let flat = |t: Tensor<D>| t.reshape([n]);
-        let (time, moment_1, moment_2) = match state {
-            Some(s) => (s.momentum.time + 1, flat(s.momentum.moment_1), flat(s.momentum.moment_2)),
-            // Zero moments of the parameter's dtype: the first step's sums are then Burn's.
-            None => (1, flat(tensor.zeros_like()), flat(tensor.zeros_like())),
+        // Zero moments of the parameter's dtype: the first step's sums are then Burn's, and a zero
+        // running maximum gives way to the first m₂ (never negative), as Burn starts it.
+        let zeros = || flat(tensor.zeros_like());
+        let (time, moment_1, moment_2, max_moment_2) = match state {
+            Some(s) => (s.momentum.time + 1, flat(s.momentum.moment_1), flat(s.momentum.moment_2), s.momentum.max_moment_2.map(flat)),
+            None => (1, zeros(), zeros(), None),
         };
+        let max_moment_2 = if self.amsgrad { max_moment_2.unwrap_or_else(zeros) } else { moment_2.clone() };
         // Burn's scalars, in f32 as Burn computes them.
         let t = time as i32;
         let bias_correction_2 = (1.0 - self.beta_2.powi(t)).sqrt();
@@ -277,6 +301,8 @@ impl Optimizer for FusedAdam {
             flat(grad).into_dispatch(),
             moment_1.into_dispatch(),
             moment_2.into_dispatch(),
+            max_moment_2.into_dispatch(),
+            self.amsgrad,
             lr as f32 as f64,
             self.beta_1 as f64,
             self.beta_2 as f64,
@@ -286,7 +312,8 @@ impl Optimizer for FusedAdam {
         );
         let out: Tensor<2> = Tensor::from_dispatch(out);
         let row = |i: usize| out.clone().slice([Slice::from(i..i + 1), Slice::from(0..n)]).reshape(shape.clone());
-        let momentum = AdaptiveMomentumState::new(time, row(1), row(2));
+        let mut momentum = AdaptiveMomentumState::new(time, row(1), row(2));
+        momentum.max_moment_2 = self.amsgrad.then(|| row(3));
         (row(0), Some(AdamState::new(momentum)))
     }
 

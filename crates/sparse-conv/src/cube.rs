@@ -385,7 +385,9 @@ fn sum_slices_kernel<F: Float, N: Size>(partial: &[Vector<F, N>], out: &mut [Vec
     out[i] = sum;
 }
 
-/// One Adam step per element ([`crate::adam`]'s arithmetic): `out = [θ'; m₁'; m₂']`, each `len`.
+/// One Adam step per element ([`crate::adam`]'s arithmetic): `out = [θ'; m₁'; m₂']`, each `len`,
+/// with `amsgrad` also the new running maximum of m₂ (Burn's `max_pair`: `b` where the old
+/// maximum is lower).
 #[cube(launch_unchecked)]
 #[allow(clippy::too_many_arguments)]
 fn adam_kernel(
@@ -393,6 +395,7 @@ fn adam_kernel(
     grad: &[f32],
     moment_1: &[f32],
     moment_2: &[f32],
+    max_moment_2: &[f32],
     out: &mut [f32],
     len: usize,
     lr: f32,
@@ -404,6 +407,7 @@ fn adam_kernel(
     correction: f32,
     epsilon: f32,
     #[comptime] decay: bool,
+    #[comptime] amsgrad: bool,
 ) {
     let i = ABSOLUTE_POS;
     if i >= len {
@@ -416,7 +420,15 @@ fn adam_kernel(
     }
     let a = moment_1[i] * beta_1 + g * one_minus_beta_1;
     let b = moment_2[i] * beta_2 + g * g * one_minus_beta_2;
-    let step = a * correction / (f32::sqrt(b) + epsilon);
+    let mut v = b;
+    if amsgrad {
+        let previous = max_moment_2[i];
+        if b < previous {
+            v = previous;
+        }
+        out[3 * len + i] = v;
+    }
+    let step = a * correction / (f32::sqrt(v) + epsilon);
     out[i] = p - step * lr;
     out[len + i] = a;
     out[2 * len + i] = b;
@@ -675,18 +687,21 @@ pub(crate) fn runs(t: &CubeTensor) -> bool {
 }
 
 /// One Adam step of a flat f32 parameter on a cube device, `[3, n]` (see [`crate::adam`]).
-pub(crate) fn adam_step(param: CubeTensor, grad: CubeTensor, moment_1: CubeTensor, moment_2: CubeTensor, s: crate::adam::AdamScalars<f32>) -> CubeTensor {
-    let [param, grad, moment_1, moment_2] = [param, grad, moment_1, moment_2].map(contiguous);
+pub(crate) fn adam_step(param: CubeTensor, grad: CubeTensor, moment_1: CubeTensor, moment_2: CubeTensor, max_moment_2: Option<CubeTensor>, s: crate::adam::AdamScalars<f32>) -> CubeTensor {
+    let amsgrad = max_moment_2.is_some();
+    // Without AMSGrad the kernel never reads the maximum; m₂ stands in for the binding.
+    let max_moment_2 = max_moment_2.unwrap_or_else(|| moment_2.clone());
+    let [param, grad, moment_1, moment_2, max_moment_2] = [param, grad, moment_1, moment_2, max_moment_2].map(contiguous);
     let len = param.meta.num_elements();
-    let out = empty_f32(&param, Shape::new([3, len]));
+    let out = empty_f32(&param, Shape::new([3 + amsgrad as usize, len]));
     if len == 0 {
         return out;
     }
     let dim = CubeDim::new_1d(256);
     let count = CubeCount::Static(len.div_ceil(256) as u32, 1, 1);
     let buffer = |t: &CubeTensor| vectors(t, 1);
-    // Safety: the kernel reads `len` elements of each input and writes `3 · len` of `out`, the
-    // buffers' sizes.
+    // Safety: the kernel reads `len` elements of each input and writes `3 · len` (AMSGrad:
+    // `4 · len`) of `out`, the buffers' sizes.
     unsafe {
         adam_kernel::launch_unchecked(
             &param.client,
@@ -696,6 +711,7 @@ pub(crate) fn adam_step(param: CubeTensor, grad: CubeTensor, moment_1: CubeTenso
             buffer(&grad),
             buffer(&moment_1),
             buffer(&moment_2),
+            buffer(&max_moment_2),
             buffer(&out),
             len,
             s.lr,
@@ -707,6 +723,7 @@ pub(crate) fn adam_step(param: CubeTensor, grad: CubeTensor, moment_1: CubeTenso
             s.correction,
             s.epsilon,
             s.weight_decay != 0.0,
+            amsgrad,
         );
     }
     out

@@ -1,5 +1,5 @@
 //! `FusedAdam` steps parameters as Burn's `Adam` does (weight decay, AMSGrad, several ranks) on
-//! every backend, and resumes from its own or Burn's saved state.
+//! every backend, and resumes from its own or Burn's saved state, with and without AMSGrad.
 // burn-ndarray is deprecated in Burn 0.22 but is one of the CPU backends pmunet supports.
 #![allow(deprecated)]
 
@@ -76,27 +76,30 @@ fn resumes_from_saved_state() {
     let device = Device::flex().autodiff();
     let dir = std::env::temp_dir().join(format!("pmunet-adam-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let new_fused = || FusedAdamConfig::new().with_weight_decay(Some(WeightDecayConfig { penalty: 0.01 })).init();
-    let mut straight = new_fused();
-    let mut model = params(&device, DType::F32);
-    for i in 0..6 {
-        model = step(model, &mut straight, i);
-    }
-    let expected = flat(&model);
-    // Three steps by FusedAdam, or by Burn's Adam, then saved; three more by a new FusedAdam
-    // loaded from that state.
-    for (name, mut first) in [("fused", new_fused()), ("burn", AdamConfig::new().with_weight_decay(Some(WeightDecayConfig { penalty: 0.01 })).init())] {
+    let decay = || Some(WeightDecayConfig { penalty: 0.01 });
+    for amsgrad in [false, true] {
+        let new_fused = || FusedAdamConfig::new().with_weight_decay(decay()).with_amsgrad(amsgrad).init();
+        let mut straight = new_fused();
         let mut model = params(&device, DType::F32);
-        for i in 0..3 {
-            model = step(model, &mut first, i);
+        for i in 0..6 {
+            model = step(model, &mut straight, i);
         }
-        let path = dir.join(format!("{name}.bpk"));
-        first.save(&path).unwrap();
-        let mut resumed = new_fused().load(&path).unwrap();
-        for i in 3..6 {
-            model = step(model, &mut resumed, i);
+        let expected = flat(&model);
+        // Three steps by FusedAdam, or by Burn's Adam, then saved; three more by a new FusedAdam
+        // loaded from that state.
+        for (name, mut first) in [("fused", new_fused()), ("burn", AdamConfig::new().with_weight_decay(decay()).with_amsgrad(amsgrad).init())] {
+            let mut model = params(&device, DType::F32);
+            for i in 0..3 {
+                model = step(model, &mut first, i);
+            }
+            let path = dir.join(format!("{name}-{amsgrad}.bpk"));
+            first.save(&path).unwrap();
+            let mut resumed = new_fused().load(&path).unwrap();
+            for i in 3..6 {
+                model = step(model, &mut resumed, i);
+            }
+            assert_close(&flat(&model), &expected, 1e-6, &format!("resumed from {name}'s state, AMSGrad {amsgrad}"));
         }
-        assert_close(&flat(&model), &expected, 1e-6, &format!("resumed from {name}'s state"));
     }
     std::fs::remove_dir_all(&dir).ok();
 }
