@@ -124,7 +124,7 @@ pub fn adam_update<T: Element>(param: &[T], grad: &[T], moment_1: &[T], moment_2
     let out_ptr = &out_ptr;
     (0..n.div_ceil(CHUNK)).into_par_iter().for_each(|chunk| {
         let range = chunk * CHUNK..((chunk + 1) * CHUNK).min(n);
-        // SAFETY: the three regions of this chunk are written by this task only.
+        // SAFETY: each region's part for this chunk is written by this task only.
         let at = |region: usize| unsafe { std::slice::from_raw_parts_mut(out_ptr.0.add(region * n + range.start), range.len()) };
         let (p, m1, m2) = (at(0), at(1), at(2));
         let inputs = [param, grad, moment_1, moment_2].map(|v| &v[range.clone()]);
