@@ -110,6 +110,14 @@ pub struct AdamScalars<T> {
     pub epsilon: T,
 }
 
+impl<T: Element> AdamScalars<T> {
+    /// From [`AdamBackend::adam_step`]'s arguments.
+    pub fn new(lr: f64, beta_1: f64, beta_2: f64, weight_decay: f64, correction: f64, epsilon: f64) -> Self {
+        let t = T::from_f64;
+        AdamScalars { lr: t(lr), beta_1: t(beta_1), beta_2: t(beta_2), weight_decay: t(weight_decay), correction: t(correction), epsilon: t(epsilon) }
+    }
+}
+
 /// Elements per parallel task.
 const CHUNK: usize = 1 << 15;
 
@@ -183,14 +191,7 @@ macro_rules! cpu_backend {
             ) -> FloatTensor<Self> {
                 let n = param.shape().num_elements();
                 on_host!($backend, [param, grad, moment_1, moment_2, max_moment_2], [3 + amsgrad as usize, n], |T| {
-                    let s = AdamScalars {
-                        lr: T::from_f64(lr),
-                        beta_1: T::from_f64(beta_1),
-                        beta_2: T::from_f64(beta_2),
-                        weight_decay: T::from_f64(weight_decay),
-                        correction: T::from_f64(correction),
-                        epsilon: T::from_f64(epsilon),
-                    };
+                    let s = AdamScalars::<T>::new(lr, beta_1, beta_2, weight_decay, correction, epsilon);
                     let max = amsgrad.then(|| T::host::<Self>(&max_moment_2));
                     adam_update(&T::host::<Self>(&param), &T::host::<Self>(&grad), &T::host::<Self>(&moment_1), &T::host::<Self>(&moment_2), max.as_deref(), s)
                 })
@@ -224,8 +225,7 @@ impl AdamBackend for CubeBackend {
         if !crate::cube::runs(&param) {
             return composed::<Self>(param, grad, moment_1, moment_2, max_moment_2, amsgrad, lr, beta_1, beta_2, weight_decay, correction, epsilon);
         }
-        let s = |v: f64| v as f32;
-        let scalars = AdamScalars { lr: s(lr), beta_1: s(beta_1), beta_2: s(beta_2), weight_decay: s(weight_decay), correction: s(correction), epsilon: s(epsilon) };
+        let scalars = AdamScalars::<f32>::new(lr, beta_1, beta_2, weight_decay, correction, epsilon);
         crate::cube::adam_step(param, grad, moment_1, moment_2, amsgrad.then_some(max_moment_2), scalars)
     }
 }

@@ -379,7 +379,9 @@ pub fn input_grad<T: Element>(
 /// A `len`-element output of `c`-channel rows written [`CHUNK_ROWS`] rows per parallel task;
 /// `fill` must write every element of the chunk it is given.
 fn map_rows<T: Element>(len: usize, c: usize, fill: impl Fn(usize, &mut [MaybeUninit<T>]) + Sync) -> Vec<T> {
-    filled_in_chunks(len, CHUNK_ROWS * c, |chunk, dst| vectorized(|| fill(chunk, dst)))
+    // Not through `vectorized`: LLVM does not inline these passes' closures into its AVX-512
+    // body (checked in the binary), and the passes run at memory speed anyway.
+    filled_in_chunks(len, CHUNK_ROWS * c, fill)
 }
 
 #[cfg(test)]
