@@ -311,9 +311,11 @@ unsafe impl<T> Send for SyncPtr<T> {}
 unsafe impl<T> Sync for SyncPtr<T> {}
 
 /// Runs `f` compiled for AVX-512 where the CPU has it (and `PMUNET_AVX512` is not `0`). Plain
-/// loops over channels or elements, inlined into `f` (a closure that calls an
-/// `#[inline(always)]` function is, reliably), are vectorized for the features of the function
-/// they land in; the default x86-64 target has 128-bit SSE2 only. Without fused multiply-adds
+/// loops over channels or elements are vectorized for the features of the function they land
+/// in, so only if LLVM inlines `f` into it: a small closure calling an `#[inline(always)]`
+/// function is (Adam's chunks, the ReLU gradient); the batch-norm passes' row closures were not,
+/// which the binary shows (`zmm` or only `xmm` in the symbol). The default x86-64 target has
+/// 128-bit SSE2 only. Without fused multiply-adds
 /// (Rust never contracts `a·b + c`) the results are the same bits either way.
 #[inline(always)]
 pub(crate) fn vectorized<R>(f: impl FnOnce() -> R) -> R {
