@@ -205,8 +205,9 @@ const MIN_BLOCK_ROWS: usize = 64;
 const MAX_BLOCK_ROWS: usize = 512;
 
 /// Every offset's `[c_src, c_dst]` matrix (`W_k`, or `W_kᵀ` read through the strides
-/// `(rs, cs)` of its rows and columns) packed as 32-column panels: panel `p` of offset `k` holds
-/// `kc` rows of 32 floats (zero past `c_dst`), at `(k·panels + p)·c_src·32`.
+/// `(rs, cs)` of its rows and columns: `(c_dst, 1)` or `(1, c_src)`) packed as 32-column panels:
+/// panel `p` of offset `k` holds `kc` rows of 32 floats (zero past `c_dst`), at
+/// `(k·panels + p)·c_src·32`.
 fn pack_panels(weight: &[f32], volume: usize, c_src: usize, c_dst: usize, rs: usize, cs: usize) -> Vec<f32> {
     let panels = c_dst.div_ceil(NR);
     let mut packed = vec![0.0f32; volume * panels * c_src * NR];
@@ -216,9 +217,20 @@ fn pack_panels(weight: &[f32], volume: usize, c_src: usize, c_dst: usize, rs: us
     packed.par_chunks_mut(panels * c_src * NR).enumerate().for_each(|(k, dst)| {
         let w = &weight[k * c_src * c_dst..][..c_src * c_dst];
         for (p, panel) in dst.chunks_exact_mut(c_src * NR).enumerate() {
-            for (kk, row) in panel.chunks_exact_mut(NR).enumerate() {
-                for (j, v) in row.iter_mut().enumerate().take(c_dst - p * NR) {
-                    *v = w[kk * rs + (p * NR + j) * cs];
+            let cols = NR.min(c_dst - p * NR);
+            if cs == 1 {
+                // W_k: each panel row is a piece of a weight row.
+                for (kk, row) in panel.chunks_exact_mut(NR).enumerate() {
+                    row[..cols].copy_from_slice(&w[kk * rs + p * NR..][..cols]);
+                }
+            } else {
+                // W_kᵀ: read the weight by rows (a panel column each), write the panel, which
+                // stays in L1, by columns.
+                debug_assert_eq!(rs, 1, "a weight read by rows or by columns");
+                for j in 0..cols {
+                    for (kk, &v) in w[(p * NR + j) * cs..][..c_src].iter().enumerate() {
+                        panel[kk * NR + j] = v;
+                    }
                 }
             }
         }
