@@ -107,7 +107,7 @@ fn mask(cols: usize, v: usize) -> __mmask16 {
     if c >= 16 { 0xFFFF } else { ((1u32 << c) - 1) as u16 }
 }
 
-/// `out[i][j] (+)= Σ_p x[p][i] · g[p][j]` for `R` rows `i0..i0 + R` and the `cols` (≤ 32)
+/// `out[i][j] (+)= (Σ_p x[p][i] · g[p][j])` for `R` rows `i0..i0 + R` and the `cols` (≤ 32)
 /// columns from `j0`, over the pairs' rows `xs[p]`, `gs[p]`; with `accumulate` false `out` is
 /// written without being read.
 ///
@@ -131,12 +131,6 @@ unsafe fn pair_outer_products<const R: usize>(
     unsafe {
         let (m0, m1) = (mask(cols, 0), mask(cols, 1));
         let mut acc = [[_mm512_setzero_ps(); 2]; R];
-        if accumulate {
-            for (r, acc) in acc.iter_mut().enumerate() {
-                let o = out.add((i0 + r) * ld + j0);
-                *acc = [_mm512_maskz_loadu_ps(m0, o), _mm512_maskz_loadu_ps(m1, o.add(16))];
-            }
-        }
         for (&x, &g) in xs.iter().zip(gs) {
             let g = g.wrapping_add(j0);
             let b0 = _mm512_maskz_loadu_ps(m0, g);
@@ -150,8 +144,13 @@ unsafe fn pair_outer_products<const R: usize>(
         }
         for (r, acc) in acc.iter().enumerate() {
             let o = out.add((i0 + r) * ld + j0);
-            _mm512_mask_storeu_ps(o, m0, acc[0]);
-            _mm512_mask_storeu_ps(o.add(16), m1, acc[1]);
+            let (mut v0, mut v1) = (acc[0], acc[1]);
+            if accumulate {
+                v0 = _mm512_add_ps(_mm512_maskz_loadu_ps(m0, o), v0);
+                v1 = _mm512_add_ps(_mm512_maskz_loadu_ps(m1, o.add(16)), v1);
+            }
+            _mm512_mask_storeu_ps(o, m0, v0);
+            _mm512_mask_storeu_ps(o.add(16), m1, v1);
         }
     }
 }
@@ -444,7 +443,8 @@ pub fn weight_grad(x: &[f32], c_in: usize, grad_out: &[f32], c_out: usize, pairs
         let xs: Vec<*const f32> = pairs.input[a..b].iter().map(|&i| unsafe { x.as_ptr().add(i as usize * c_in) }).collect();
         let gs: Vec<*const f32> = pairs.output[a..b].iter().map(|&o| unsafe { grad_out.as_ptr().add(o as usize * c_out) }).collect();
         // Blocks of pairs whose rows stay in L1 while every tile of the block passes over them;
-        // each tile's sums go on in pair order, so the blocking does not change the result.
+        // each tile sums a block's products in registers, then adds them to its running sum (loading
+        // it only then, so the FMAs never wait on it): a grouping set by PAIR_BLOCK, not by threads.
         for (block_index, (xs_block, gs_block)) in xs.chunks(PAIR_BLOCK).zip(gs.chunks(PAIR_BLOCK)).enumerate() {
             // The next block's rows are scattered, so the hardware prefetchers cannot see them
             // coming: ask for them while this block's tiles run, a share per tile (−7 to −9 % of
