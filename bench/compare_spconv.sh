@@ -4,7 +4,7 @@
 #
 #   bash bench/compare_spconv.sh [--install] [--threads 2] [--runs 10] [--warmup 2]
 #                                [--model-runs 3] [--model-warmup 1] [--backends flex,ndarray]
-#                                [--scene FILE.npy] [--out DIR] [--quick]
+#                                [--rounds 1] [--scene FILE.npy] [--out DIR] [--quick]
 #
 #   --install       create the peer's venv ($PMUNET_PEER_VENV, default ~/.cache/spconv-peer) with
 #                   torch 2.5.1, numpy 1.26.4 and spconv 2.3.8 if it is absent (~2.5 min, ~5 GB).
@@ -12,11 +12,16 @@
 #   --runs N        timed runs of each conv figure (default 10; 2 with --quick); --warmup N (default 2; 1).
 #   --model-runs N  timed runs of each MinkUNet figure (default 3), --model-warmup N (default 1).
 #   --backends L    pmunet backends, comma-separated (default flex,ndarray).
+#   --rounds N      run every step N times, interleaved (round r in DIR/round<r>/, the peer first in
+#                   odd rounds and last in even ones); the table gives each figure's median over the
+#                   rounds and each ratio's median and range over the rounds' own ratios, so both
+#                   sides of a ratio are measured in the same minutes (default 1).
 #   --scene FILE    int32 N×4 .npy (default ../shared/bench/scene_jrdb_like.npy from the repo root).
 #   --out DIR       results folder (default bench/results/<date-time>/).
 #   --quick         few runs and no MinkUNet: a test of the scripts, not a measurement.
 #
-# Steps (each writes <name>.json, <name>.log = stderr, <name>.rc = exit status into the results folder):
+# Steps (each writes <name>.json, <name>.log = stderr, <name>.rc = exit status into the results folder,
+# or into its round<r>/ folder with --rounds):
 #   spconv                 bench/peer_spconv.py (parts gemm,convs,crosscheck[,minkunet])
 #   pmunet_conv_<b>        cargo run -p sparse-conv --bin sparse-conv-bench -- --coords S --backend b ... --json
 #   pmunet_model_<b>_b1    cargo run -p model --bin model-bench -- --model person_minkunet ... --batch 1 --only infer
@@ -26,13 +31,13 @@
 # cargo runs with the default (dev) profile and no extra features, so the build in target/ is reused.
 set -uo pipefail
 
-usage() { sed -n '2,26p' "$0" | sed 's/^# \{0,1\}//'; }
+usage() { sed -n '2,31p' "$0" | sed 's/^# \{0,1\}//'; }
 die() { echo "compare_spconv.sh: $*" >&2; exit 2; }
 
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 cd "$ROOT" || die "cannot cd to $ROOT"
 
-INSTALL=0 QUICK=0 THREADS=2 RUNS="" WARMUP="" MODEL_RUNS=3 MODEL_WARMUP=1 BACKENDS=flex,ndarray
+INSTALL=0 QUICK=0 THREADS=2 RUNS="" WARMUP="" MODEL_RUNS=3 MODEL_WARMUP=1 BACKENDS=flex,ndarray ROUNDS=1
 SCENE=../shared/bench/scene_jrdb_like.npy OUT=""
 VENV=${PMUNET_PEER_VENV:-$HOME/.cache/spconv-peer}
 
@@ -48,6 +53,7 @@ while [[ $# -gt 0 ]]; do
         --model-runs) need "$@"; posint "$1" "$2"; MODEL_RUNS=$2; shift 2 ;;
         --model-warmup) need "$@"; posint "$1" "$2"; MODEL_WARMUP=$2; shift 2 ;;
         --backends) need "$@"; BACKENDS=$2; shift 2 ;;
+        --rounds) need "$@"; posint "$1" "$2"; ROUNDS=$2; shift 2 ;;
         --scene) need "$@"; SCENE=$2; shift 2 ;;
         --out) need "$@"; OUT=$2; shift 2 ;;
         -h|--help) usage; exit 0 ;;
@@ -56,7 +62,7 @@ while [[ $# -gt 0 ]]; do
 done
 [[ $THREADS -ge 1 ]] || die "--threads must be at least 1 (pmunet's 0 = all cores has no spconv twin)"
 if [[ $QUICK == 1 ]]; then RUNS=${RUNS:-2}; WARMUP=${WARMUP:-1}; else RUNS=${RUNS:-10}; WARMUP=${WARMUP:-2}; fi
-[[ $RUNS -ge 1 && $MODEL_RUNS -ge 1 ]] || die "--runs and --model-runs must be at least 1"
+[[ $RUNS -ge 1 && $MODEL_RUNS -ge 1 && $ROUNDS -ge 1 ]] || die "--runs, --model-runs and --rounds must be at least 1"
 IFS=, read -r -a BACKEND_LIST <<< "$BACKENDS"
 for b in "${BACKEND_LIST[@]}"; do
     [[ $b == flex || $b == ndarray ]] || die "--backends: '$b' is not flex or ndarray"
@@ -98,6 +104,7 @@ RES=$(cd "$RES" && pwd)
     echo "model_runs=$MODEL_RUNS"
     echo "model_warmup=$MODEL_WARMUP"
     echo "backends=$BACKENDS"
+    echo "rounds=$ROUNDS"
     echo "quick=$QUICK"
     echo "peer=$PEER_VERSIONS"
     echo "git_head=$(git rev-parse --short HEAD 2> /dev/null || echo '?')"
@@ -110,46 +117,62 @@ read -r LOAD1 _ < /proc/loadavg 2> /dev/null && echo "[compare] load average now
 export OMP_NUM_THREADS=$THREADS MKL_NUM_THREADS=$THREADS RAYON_NUM_THREADS=$THREADS
 
 FAILED=0
+DIR=$RES  # where step() writes: the results folder, or the round's folder
 step() { # step NAME COMMAND...: stdout -> NAME.json, stderr -> NAME.log, status -> NAME.rc
     local name=$1; shift
     echo "[compare] $name: $*"
     local t0=$SECONDS
-    "$@" > "$RES/$name.json" 2> "$RES/$name.log"
+    "$@" > "$DIR/$name.json" 2> "$DIR/$name.log"
     local rc=$?
-    echo "$rc" > "$RES/$name.rc"
+    echo "$rc" > "$DIR/$name.rc"
     if [[ $rc -ne 0 ]]; then
         FAILED=$((FAILED + 1))
         echo "[compare] $name FAILED (exit $rc) after $((SECONDS - t0)) s; last lines of $name.log:" >&2
-        tail -n 15 "$RES/$name.log" >&2
+        tail -n 15 "$DIR/$name.log" >&2
     else
         echo "[compare] $name done in $((SECONDS - t0)) s"
     fi
-    if grep -q '^ *Compiling ' "$RES/$name.log" 2> /dev/null; then
+    if grep -q '^ *Compiling ' "$DIR/$name.log" 2> /dev/null; then
         echo "[compare] warning: cargo compiled something before $name (sources changed since the last build?)" >&2
     fi
 }
 
-# --- the peer ---------------------------------------------------------------------------------
-PARTS=gemm,convs,crosscheck
-[[ $QUICK == 1 ]] || PARTS=$PARTS,minkunet
-step spconv "$PY" bench/peer_spconv.py "$SCENE" --threads "$THREADS" --runs "$RUNS" --warmup "$WARMUP" \
-    --parts "$PARTS" --mink-runs "$MODEL_RUNS" --mink-warmup "$MODEL_WARMUP"
+peer() {
+    local parts=gemm,convs,crosscheck
+    [[ $QUICK == 1 ]] || parts=$parts,minkunet
+    step spconv "$PY" bench/peer_spconv.py "$SCENE" --threads "$THREADS" --runs "$RUNS" --warmup "$WARMUP" \
+        --parts "$parts" --mink-runs "$MODEL_RUNS" --mink-warmup "$MODEL_WARMUP"
+}
 
-# --- pmunet -----------------------------------------------------------------------------------
-for b in "${BACKEND_LIST[@]}"; do
-    step "pmunet_conv_$b" cargo run -p sparse-conv --bin sparse-conv-bench -- \
-        --coords "$SCENE" --backend "$b" --threads "$THREADS" --runs "$RUNS" --warmup "$WARMUP" --json
-done
-if [[ $QUICK != 1 ]]; then
+pmunet() {
     for b in "${BACKEND_LIST[@]}"; do
-        # The peer's rows: inference at batch 1, the training step (and its peak) at batch 2, each
-        # in a process of its own so the peak is that figure's alone.
-        for spec in "1 infer" "2 train"; do
-            read -r batch only <<< "$spec"
-            step "pmunet_model_${b}_b$batch" cargo run -p model --bin model-bench -- \
-                --model person_minkunet --coords "$SCENE" --backend "$b" --batch "$batch" --only "$only" \
-                --threads "$THREADS" --runs "$MODEL_RUNS" --warmup "$MODEL_WARMUP" --json
+        step "pmunet_conv_$b" cargo run -p sparse-conv --bin sparse-conv-bench -- \
+            --coords "$SCENE" --backend "$b" --threads "$THREADS" --runs "$RUNS" --warmup "$WARMUP" --json
+    done
+    if [[ $QUICK != 1 ]]; then
+        for b in "${BACKEND_LIST[@]}"; do
+            # The peer's rows: inference at batch 1, the training step (and its peak) at batch 2, each
+            # in a process of its own so the peak is that figure's alone.
+            for spec in "1 infer" "2 train"; do
+                read -r batch only <<< "$spec"
+                step "pmunet_model_${b}_b$batch" cargo run -p model --bin model-bench -- \
+                    --model person_minkunet --coords "$SCENE" --backend "$b" --batch "$batch" --only "$only" \
+                    --threads "$THREADS" --runs "$MODEL_RUNS" --warmup "$MODEL_WARMUP" --json
+            done
         done
+    fi
+}
+
+if [[ $ROUNDS == 1 ]]; then
+    peer
+    pmunet
+else
+    for ((r = 1; r <= ROUNDS; r++)); do
+        DIR=$RES/round$r
+        mkdir -p "$DIR" || die "cannot create $DIR"
+        echo "[compare] round $r of $ROUNDS"
+        # Alternate which side runs first, so neither always gets the quieter minutes.
+        if ((r % 2)); then peer; pmunet; else pmunet; peer; fi
     done
 fi
 echo "load_after=$(cut -d' ' -f1-3 /proc/loadavg 2> /dev/null)" >> "$RES/meta.txt"

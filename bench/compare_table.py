@@ -11,7 +11,9 @@ Reads (whichever are there) from RESULTS_DIR:
   <name>.rc                          exit status of each step (absent: the step was not run)
   <name>.log                         its stderr
   meta.txt                           key=value lines written by compare_spconv.sh
-prints the table (plus a few context lines and notes) and writes it to RESULTS_DIR/table.md.
+or, after `--rounds N`, the same files in RESULTS_DIR/round1 ... roundN/ (meta.txt stays at the
+top): then each figure is its median over the rounds and each ratio the median of the rounds' own
+ratios, with their range; prints the table (plus a few context lines and notes) and writes it to RESULTS_DIR/table.md.
 Standard library only.
 """
 import json
@@ -123,53 +125,87 @@ def num(v, unit):
     return f"{v:,.2f}" if v < 100 else f"{v:,.1f}"
 
 
+def median(values):
+    values = sorted(values)
+    n = len(values)
+    return values[n // 2] if n % 2 else (values[n // 2 - 1] + values[n // 2]) / 2
+
+
+def round_folders(folder):
+    """The folders of the rounds of a `--rounds` run, in order, else [folder]."""
+    rounds = []
+    while os.path.isdir(os.path.join(folder, f"round{len(rounds) + 1}")):
+        rounds.append(os.path.join(folder, f"round{len(rounds) + 1}"))
+    return rounds or [folder]
+
+
+class Round:
+    """The documents one round's steps wrote."""
+
+    def __init__(self, folder):
+        self.folder = folder
+        self.peer = load(folder, "spconv")
+        self.conv = {b: load(folder, f"pmunet_conv_{b}") for b in BACKENDS}
+        self.model1 = {b: load(folder, f"pmunet_model_{b}_b1") for b in BACKENDS}
+        self.model2 = {b: load(folder, f"pmunet_model_{b}_b2") for b in BACKENDS}
+
+    def part(self, name):
+        """The peer's document where it ran part `name`, else why not."""
+        if isinstance(self.peer, Missing):
+            return self.peer
+        return self.peer if name in self.peer.get("parts", [name]) else Missing("skipped")
+
+    def rows(self):
+        """(label, unit, kind, spconv value, {backend: pmunet value}); kind: time | mem | rate."""
+        part, conv, model1, model2 = self.part, self.conv, self.model1, self.model2
+        rows = [("subm k3 kernel-map build", "ms", "time", get(part("convs"), "convs", "subm_map", "median_ms"),
+                 {b: get(conv[b], "map_ms") for b in BACKENDS})]
+        for c in (32, 64, 128):
+            for key, label, field in (("fwd", "fwd", "fwd_ms"), ("fwd_bwd", "fwd+bwd", "fwd_bwd_ms")):
+                rows.append((f"subm k3 C{c} {label}", "ms", "time", get(part("convs"), "convs", "subm", str(c), key, "median_ms"),
+                             {b: get(conv[b], "results", ("c_in", c), field) for b in BACKENDS}))
+        # The same convs by the fastest run on each side: steadier than medians on a shared VM (other
+        # load only adds time); pmunet builds before the minima were printed show n/a.
+        for c in (32, 64, 128):
+            for key, label, field in (("fwd", "fwd", "fwd_min_ms"), ("fwd_bwd", "fwd+bwd", "fwd_bwd_min_ms")):
+                rows.append((f"subm k3 C{c} {label}, fastest run", "ms", "time", get(part("convs"), "convs", "subm", str(c), key, "min_ms"),
+                             {b: get(conv[b], "results", ("c_in", c), field) for b in BACKENDS}))
+        rows.append(("down k2s2 C64 fwd+bwd (map incl.)", "ms", "time",
+                     get(part("convs"), "convs", "down_k2s2_c64_fwd_bwd_incl_map", "median_ms"),
+                     {b: get(conv[b], "strided", ("channels", 64), "down_fwd_bwd_ms") for b in BACKENDS}))
+        rows.append(("up k2 C64 fwd+bwd", "ms", "time", get(part("convs"), "convs", "up_k2_c64_fwd_bwd", "median_ms"),
+                     {b: get(conv[b], "strided", ("channels", 64), "up_fwd_bwd_ms") for b in BACKENDS}))
+        rows.append(("MinkUNet inference, 1 frame", "ms", "time", get(part("minkunet"), "minkunet", "infer", "infer_b1", "median_ms"),
+                     {b: get(model1[b], "forward_ms") for b in BACKENDS}))
+        rows.append(("MinkUNet training step, batch 2", "ms", "time",
+                     get(part("minkunet"), "minkunet", "train", "train_b2", "median_ms"),
+                     {b: get(model2[b], "train_step_ms") for b in BACKENDS}))
+        rows.append(("peak memory (RSS) of the training step, batch 2", "MiB", "mem",
+                     get(part("minkunet"), "minkunet", "train", "peak_rss_mib"),
+                     {b: get(model2[b], "peak_train_mib") for b in BACKENDS}))
+        # sparse-conv-bench's `sgemm` object ({size, ms, gflops}: the GEMM its kernels call) where it
+        # prints one; older builds print none (n/a).
+        rows.append(("SGEMM ceiling, 2048³ matmul", "GFLOP/s", "rate", get(part("gemm"), "gemm", "gflops_median"),
+                     {b: get(conv[b], "sgemm", "gflops") for b in BACKENDS}))
+        return rows
+
+
+def combined(values):
+    """The median of the values that are numbers, else the first value's reason."""
+    numbers = [v for v in values if not isinstance(v, Missing)]
+    return median(numbers) if numbers else values[0]
+
+
 def main():
     if len(sys.argv) != 2:
         raise SystemExit(__doc__)
     folder = sys.argv[1]
     meta = read_meta(folder)
-    peer = load(folder, "spconv")
-    conv = {b: load(folder, f"pmunet_conv_{b}") for b in BACKENDS}
-    model1 = {b: load(folder, f"pmunet_model_{b}_b1") for b in BACKENDS}
-    model2 = {b: load(folder, f"pmunet_model_{b}_b2") for b in BACKENDS}
+    rounds = [Round(f) for f in round_folders(folder)]
+    first = rounds[0]
+    peer, conv, model1, model2, part = first.peer, first.conv, first.model1, first.model2, first.part
     threads = meta.get("threads") or str(get(peer, "threads"))
-
-    def part(name):
-        """The peer's document where it ran part `name`, else why not."""
-        if isinstance(peer, Missing):
-            return peer
-        return peer if name in peer.get("parts", [name]) else Missing("skipped")
-
-    # (label, unit, kind, spconv value, {backend: pmunet value}); kind: time | mem | rate
-    rows = [("subm k3 kernel-map build", "ms", "time", get(part("convs"), "convs", "subm_map", "median_ms"),
-             {b: get(conv[b], "map_ms") for b in BACKENDS})]
-    for c in (32, 64, 128):
-        for key, label, field in (("fwd", "fwd", "fwd_ms"), ("fwd_bwd", "fwd+bwd", "fwd_bwd_ms")):
-            rows.append((f"subm k3 C{c} {label}", "ms", "time", get(part("convs"), "convs", "subm", str(c), key, "median_ms"),
-                         {b: get(conv[b], "results", ("c_in", c), field) for b in BACKENDS}))
-    # The same convs by the fastest run on each side: steadier than medians on a shared VM (other
-    # load only adds time); pmunet builds before the minima were printed show n/a.
-    for c in (32, 64, 128):
-        for key, label, field in (("fwd", "fwd", "fwd_min_ms"), ("fwd_bwd", "fwd+bwd", "fwd_bwd_min_ms")):
-            rows.append((f"subm k3 C{c} {label}, fastest run", "ms", "time", get(part("convs"), "convs", "subm", str(c), key, "min_ms"),
-                         {b: get(conv[b], "results", ("c_in", c), field) for b in BACKENDS}))
-    rows.append(("down k2s2 C64 fwd+bwd (map incl.)", "ms", "time",
-                 get(part("convs"), "convs", "down_k2s2_c64_fwd_bwd_incl_map", "median_ms"),
-                 {b: get(conv[b], "strided", ("channels", 64), "down_fwd_bwd_ms") for b in BACKENDS}))
-    rows.append(("up k2 C64 fwd+bwd", "ms", "time", get(part("convs"), "convs", "up_k2_c64_fwd_bwd", "median_ms"),
-                 {b: get(conv[b], "strided", ("channels", 64), "up_fwd_bwd_ms") for b in BACKENDS}))
-    rows.append(("MinkUNet inference, 1 frame", "ms", "time", get(part("minkunet"), "minkunet", "infer", "infer_b1", "median_ms"),
-                 {b: get(model1[b], "forward_ms") for b in BACKENDS}))
-    rows.append(("MinkUNet training step, batch 2", "ms", "time",
-                 get(part("minkunet"), "minkunet", "train", "train_b2", "median_ms"),
-                 {b: get(model2[b], "train_step_ms") for b in BACKENDS}))
-    rows.append(("peak memory (RSS) of the training step, batch 2", "MiB", "mem",
-                 get(part("minkunet"), "minkunet", "train", "peak_rss_mib"),
-                 {b: get(model2[b], "peak_train_mib") for b in BACKENDS}))
-    # sparse-conv-bench's `sgemm` object ({size, ms, gflops}: the GEMM its kernels call) where it
-    # prints one; older builds print none (n/a).
-    rows.append(("SGEMM ceiling, 2048³ matmul", "GFLOP/s", "rate", get(part("gemm"), "gemm", "gflops_median"),
-                 {b: get(conv[b], "sgemm", "gflops") for b in BACKENDS}))
+    per_round = [r.rows() for r in rounds]
 
     def ratio(kind, s, p):
         if isinstance(s, Missing) or isinstance(p, Missing) or not p:
@@ -187,31 +223,46 @@ def main():
             return "—"
         return "yes" if v <= figure else "no"
 
+    def ratio_cell(values):
+        """The median ratio, with the range over the rounds when there are several."""
+        values = [v for v in values if v is not None]
+        if not values:
+            return None, "—"
+        m = median(values)
+        if len(rounds) == 1:
+            return m, f"{m:.2f}"
+        return m, f"{m:.2f} ({min(values):.2f}–{max(values):.2f})"
+
     lines = []
     header = ["figure", "spconv 2.3.8", "pmunet flex", "pmunet ndarray", "spconv/flex", "spconv/ndarray",
               "live target", "met (flex / ndarray)", "issue's figure", "met (flex / ndarray)"]
     lines.append("| " + " | ".join(header) + " |")
     lines.append("|" + "---|" * len(header))
-    for label, unit, kind, s, p in rows:
-        ratios = {b: ratio(kind, s, p[b]) for b in BACKENDS}
+    rows = []
+    for i, (label, unit, kind, _, _) in enumerate(per_round[0]):
+        s = combined([r[i][3] for r in per_round])
+        p = {b: combined([r[i][4][b] for r in per_round]) for b in BACKENDS}
+        rows.append((label, unit, kind, s, p))
+        cells_ratios = {b: ratio_cell([ratio(kind, r[i][3], r[i][4][b]) for r in per_round]) for b in BACKENDS}
+        ratios = {b: cells_ratios[b][0] for b in BACKENDS}
         target = {"time": f"spconv/pmunet ≥ {TIME_TARGET}", "mem": "pmunet ≤ spconv", "rate": "—"}[kind]
         cells = [f"{label} ({unit})", num(s, unit)] + [num(p[b], unit) for b in BACKENDS]
-        cells += [f"{ratios[b]:.2f}" if ratios[b] is not None else "—" for b in BACKENDS]
+        cells += [cells_ratios[b][1] for b in BACKENDS]
         cells += [target, " / ".join(met(kind, ratios[b]) for b in BACKENDS) if kind != "rate" else "—"]
         figure = ISSUE_FIGURES.get(label)
         cells += [f"≤ {num(figure, unit)}" if figure is not None else "—",
                   " / ".join(met_figure(label, p[b]) for b in BACKENDS) if figure is not None else "—"]
         lines.append("| " + " | ".join(cells) + " |")
 
-    cc = get(part("crosscheck"), "crosscheck")
-    if isinstance(cc, Missing):
-        cc_cell = str(cc)
+    checks = [c for c in (get(r.part("crosscheck"), "crosscheck") for r in rounds) if not isinstance(c, Missing)]
+    if not checks:
+        cc_cell = str(get(part("crosscheck"), "crosscheck"))
         cc_threads = threads
     else:
-        per = ", ".join(str(r["rows_wrong"]) for r in cc["repeats"])
-        cc_cell = (f"{cc['rows_wrong_max']:,} of {cc['rows']:,} rows (repeats: {per}; max abs err "
-                   f"{cc['max_abs_err']:.3g})")
-        cc_threads = cc["threads"]
+        per = ", ".join(str(r["rows_wrong"]) for cc in checks for r in cc["repeats"])
+        cc_cell = (f"{max(cc['rows_wrong_max'] for cc in checks):,} of {checks[0]['rows']:,} rows (repeats: {per}; max abs err "
+                   f"{max(cc['max_abs_err'] for cc in checks):.3g})")
+        cc_threads = checks[0]["threads"]
     lines.append(f"| spconv SubMConv3d C32 rows wrong (> 1e-3) at {cc_threads} threads, vs torch gather–matmul–scatter "
                  f"| {cc_cell} | n/a | n/a | — | — | 0 rows | — | — | — |")
     table = "\n".join(lines)
@@ -219,7 +270,10 @@ def main():
     # context and notes
     ctx = []
     scene = meta.get("scene") or get(peer, "scene", "path")
-    ctx.append(f"Scene {scene}; {threads} threads; convs: median of {meta.get('runs', get(peer, 'runs'))} runs after "
+    ctx.append(f"Scene {scene}; {threads} threads; "
+               + (f"{len(rounds)} interleaved rounds (figures: median over the rounds; ratios: median of the rounds' ratios, "
+                  "with their range); " if len(rounds) > 1 else "")
+               + f"convs: median of {meta.get('runs', get(peer, 'runs'))} runs after "
                f"{meta.get('warmup', get(peer, 'warmup'))} warm-ups; "
                + ("MinkUNet skipped; " if meta.get("quick") == "1" else
                   f"MinkUNet: median of {meta.get('model_runs', '?')} after {meta.get('model_warmup', '?')} warm-ups; ")
@@ -271,23 +325,27 @@ def main():
         "SGEMM (higher is better, no target): spconv's cell is torch.matmul (MKL) of 2048³ at the same "
         "thread count; pmunet's is sparse-conv-bench's `sgemm.gflops` (the GEMM its kernels call), n/a where "
         "the build prints none.",
-        "spconv 2.3.8's CPU SubMConv3d races at > 1 thread: the last row counts wrong output rows in 3 repeats "
+        "spconv 2.3.8's CPU SubMConv3d races at > 1 thread: the last row counts wrong output rows in 3 repeats per run "
         "(it varies from call to call and can be 0), so spconv's multi-thread conv timings come from an "
         "implementation that can return wrong rows.",
     ]
     # What 1.5x spconv's training step would ask of pmunet's convolutions: the step's conv work
     # (model-bench's conv_gflop) in the time left after everything that is not a conv kernel.
-    sp_step = get(part("minkunet"), "minkunet", "train", "train_b2", "median_ms")
+    # (With rounds, every figure is its median over the rounds.)
+    sp_step = combined([get(r.part("minkunet"), "minkunet", "train", "train_b2", "median_ms") for r in rounds])
     # The best SGEMM any side measured in this run: the VM's noise lowers single readings, and
     # a 2048³ SGEMM at this thread count is as close to the cores' peak as software gets.
-    measured = [v for v in [get(part("gemm"), "gemm", "gflops_median")] + [get(conv[b], "sgemm", "gflops") for b in BACKENDS]
+    measured = [v for r in rounds
+                for v in [get(r.part("gemm"), "gemm", "gflops_median")] + [get(r.conv[b], "sgemm", "gflops") for b in BACKENDS]
                 if not isinstance(v, Missing)]
     best = max(measured) if measured else None
     for b in BACKENDS:
-        k, step, ceiling = get(model2[b], "train_kernels"), get(model2[b], "train_step_ms"), get(conv[b], "sgemm", "gflops")
+        k, step = get(model2[b], "train_kernels"), combined([get(r.model2[b], "train_step_ms") for r in rounds])
+        ceiling = combined([get(r.conv[b], "sgemm", "gflops") for r in rounds])
         if any(isinstance(v, Missing) for v in (k, step, ceiling, sp_step)) or not k.get("conv_gflop"):
             continue
-        conv_ms = k["conv_forward_ms"] + k["conv_input_grad_ms"] + k["conv_weight_grad_ms"]
+        conv_ms = combined([sum(get(r.model2[b], "train_kernels", key) for key in ("conv_forward_ms", "conv_input_grad_ms", "conv_weight_grad_ms"))
+                            for r in rounds if not isinstance(get(r.model2[b], "train_kernels"), Missing)])
         other_ms, target_ms = step - conv_ms, sp_step / TIME_TARGET
         line = (f"pmunet {b}'s training step: {k['conv_gflop']:.0f} GFLOP of convolution in {conv_ms:,.0f} ms "
                 f"({k['conv_gflop'] / conv_ms * 1e3:.0f} GFLOP/s, {100 * k['conv_gflop'] / conv_ms * 1e3 / ceiling:.0f} % of its "
@@ -308,20 +366,23 @@ def main():
             warn.append(f"the machine was busy ({key.replace('_', ' ')} the run: load average {load1:.2f}): "
                         "other processes skew these figures, spconv's OpenMP threads far more than pmunet's rayon "
                         "pool (2-thread spconv convs were seen 30-100x slower beside one busy process).")
-    for name in sorted(os.listdir(folder)):
-        if name.endswith(".log") and name.startswith("pmunet_"):
-            with open(os.path.join(folder, name), errors="replace") as fh:
-                if any(l.lstrip().startswith("Compiling ") for l in fh):
-                    warn.append(f"cargo compiled something before {name[:-4]} ran (see {name}).")
-    for name, doc in [("spconv", peer)] + [(f"pmunet_conv_{b}", conv[b]) for b in BACKENDS] + \
-            [(f"pmunet_model_{b}_b{k}", d[b]) for b in BACKENDS for k, d in ((1, model1), (2, model2))]:
-        if isinstance(doc, Missing) and doc.why == "failed":
-            warn.append(f"{name} failed: see {name}.log.")
-    if not isinstance(peer, Missing):
-        for sub in ("infer", "train"):
-            err = get(part("minkunet"), "minkunet", sub, "error")
-            if not isinstance(err, Missing):
-                warn.append(f"spconv MinkUNet {sub} subprocess failed ({err}).")
+    for r in rounds:
+        where = os.path.relpath(r.folder, folder)
+        where = "" if where == "." else where + "/"
+        for name in sorted(os.listdir(r.folder)):
+            if name.endswith(".log") and name.startswith("pmunet_"):
+                with open(os.path.join(r.folder, name), errors="replace") as fh:
+                    if any(l.lstrip().startswith("Compiling ") for l in fh):
+                        warn.append(f"cargo compiled something before {where}{name[:-4]} ran (see {where}{name}).")
+        for name, doc in [("spconv", r.peer)] + [(f"pmunet_conv_{b}", r.conv[b]) for b in BACKENDS] + \
+                [(f"pmunet_model_{b}_b{k}", d[b]) for b in BACKENDS for k, d in ((1, r.model1), (2, r.model2))]:
+            if isinstance(doc, Missing) and doc.why == "failed":
+                warn.append(f"{where}{name} failed: see {where}{name}.log.")
+        if not isinstance(r.peer, Missing):
+            for sub in ("infer", "train"):
+                err = get(r.part("minkunet"), "minkunet", sub, "error")
+                if not isinstance(err, Missing):
+                    warn.append(f"{where}spconv MinkUNet {sub} subprocess failed ({err}).")
 
     text = "\n".join(ctx) + "\n\n" + table + "\n\n" + "\n".join(f"* {n}" for n in notes)
     if warn:
