@@ -447,8 +447,8 @@ pub fn weight_grad(x: &[f32], c_in: usize, grad_out: &[f32], c_out: usize, pairs
         // it only then, so the FMAs never wait on it): a grouping set by PAIR_BLOCK, not by threads.
         for (block_index, (xs_block, gs_block)) in xs.chunks(PAIR_BLOCK).zip(gs.chunks(PAIR_BLOCK)).enumerate() {
             // The next block's rows are scattered, so the hardware prefetchers cannot see them
-            // coming: ask for them while this block's tiles run, a share per tile (−7 to −9 % of
-            // the weight gradient in a training step).
+            // coming: ask for them while this block's tiles run, a share per tile (the weight
+            // gradient of a training step: 764–796 ms without, 653–670 with).
             let next = ((block_index + 1) * PAIR_BLOCK).min(xs.len())..((block_index + 2) * PAIR_BLOCK).min(xs.len());
             let (mut next_x, mut next_g) = (RowPrefetch::new(&xs[next.clone()], c_in), RowPrefetch::new(&gs[next], c_out));
             let tiles = c_in.div_ceil(MR) * c_out.div_ceil(NR);
