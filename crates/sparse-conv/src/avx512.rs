@@ -7,14 +7,15 @@
 //! - Forward and feature gradient ([`pair_conv`]): by destination blocks when each offset's
 //!   pairs come ordered by destination row (as [`crate::KernelMap::pairs`] and
 //!   [`crate::KernelMap::pairs_by_input`] give them): a task owns a block of output rows and, for
-//!   every offset, gathers the source rows of the pairs landing in it into a row tile (a
-//!   streaming copy: a micro-kernel reading the rows in place was measured slower from 64
-//!   channels on, its scattered first reads stalling the FMAs), multiplies the tile with `W_k`
-//!   packed once per call into 32-column panels, and adds each register tile straight into the
-//!   block's rows, which stay in L2 from one offset to the next; one parallel region per call.
-//!   Pairs in another order run offset by offset, in chunks. The general path copies each tile
-//!   again (matrixmultiply's packing), repacks `W_k` for every chunk, and adds a product buffer
-//!   in a pass of its own.
+//!   every offset, multiplies the source rows of the pairs landing in it, read in place 12 at a
+//!   time, with `W_k` packed once per call into 32-column panels, and adds each register tile
+//!   straight into the block's rows, which stay in L2 from one offset to the next; one parallel
+//!   region per call. The next 12 source rows are prefetched while a tile runs: without that,
+//!   reading in place was slower than gathering the rows into a tile first (their scattered
+//!   first reads stalled the FMAs); with it, faster than the gather. Pairs in another order run
+//!   offset by offset, in chunks, gathered. The general path copies each tile again
+//!   (matrixmultiply's packing), repacks `W_k` for every chunk, and adds a product buffer in a
+//!   pass of its own.
 //!
 //! Every output element is its first term (or zero) plus each later offset's product in offset
 //! order, each product summed in registers the same way on every path and at any block size, so
@@ -193,6 +194,42 @@ unsafe fn tile_times_panel<const R: usize>(a: *const f32, lda: usize, kc: usize,
     }
 }
 
+/// [`tile_times_panel`] with the `R` rows read in place, at `rows[r]`.
+///
+/// # Safety
+/// As [`tile_times_panel`], each `rows[r]` readable for `kc` floats.
+#[allow(clippy::needless_range_loop)]
+#[target_feature(enable = "avx512f")]
+unsafe fn rows_times_panel<const R: usize>(rows: &[*const f32], kc: usize, panel: *const f32, out: &[*mut f32], cols: usize, accumulate: bool) {
+    unsafe {
+        let (m0, m1) = (mask(cols, 0), mask(cols, 1));
+        let mut acc = [[_mm512_setzero_ps(); 2]; R];
+        let mut a = [std::ptr::null::<f32>(); R];
+        a.copy_from_slice(&rows[..R]);
+        let mut panel = panel;
+        for kk in 0..kc {
+            let b0 = load(panel);
+            let b1 = load(panel.wrapping_add(16));
+            for r in 0..R {
+                let x = broadcast(a[r].wrapping_add(kk));
+                acc[r][0] = _mm512_fmadd_ps(x, b0, acc[r][0]);
+                acc[r][1] = _mm512_fmadd_ps(x, b1, acc[r][1]);
+            }
+            panel = panel.wrapping_add(NR);
+        }
+        for r in 0..R {
+            let o = out[r];
+            let (mut v0, mut v1) = (acc[r][0], acc[r][1]);
+            if accumulate {
+                v0 = _mm512_add_ps(_mm512_maskz_loadu_ps(m0, o), v0);
+                v1 = _mm512_add_ps(_mm512_maskz_loadu_ps(m1, o.add(16)), v1);
+            }
+            _mm512_mask_storeu_ps(o, m0, v0);
+            _mm512_mask_storeu_ps(o.add(16), m1, v1);
+        }
+    }
+}
+
 /// Rows per chunk of an offset's pairs in [`pair_conv`]: the unit of parallel work, whose
 /// gathered tile stays in L2 while every panel passes over it.
 const PAIR_CHUNK: usize = 256;
@@ -301,6 +338,42 @@ pub fn pair_conv(
             }
         }
     };
+    // The source rows at `srcs`, read in place, times offset k's panels, added to (or, without
+    // `accumulate`, written over) destination rows `dst`: row tile by row tile, so a tile's rows
+    // stay in L1 across the panels, asking for the next tile's (scattered) rows while this one's
+    // run.
+    let multiply_in_place = |k: usize, srcs: &[*const f32], dst: &[u32], accumulate: bool| {
+        let mut outs = [std::ptr::null_mut::<f32>(); MR];
+        let lines_per_tile = MR * c_src.div_ceil(16);
+        let per_call = lines_per_tile.div_ceil(panels);
+        for r0 in (0..srcs.len()).step_by(MR) {
+            let r_count = MR.min(srcs.len() - r0);
+            let next = (r0 + MR).min(srcs.len())..(r0 + 2 * MR).min(srcs.len());
+            let mut prefetch = RowPrefetch::new(&srcs[next], c_src);
+            for p in 0..panels {
+                let (j0, panel) = (p * NR, panel_of(k, p));
+                let cols = NR.min(c_dst - j0);
+                prefetch.issue(per_call);
+                for (r, o) in outs.iter_mut().enumerate().take(r_count) {
+                    // SAFETY: destination rows are < n_dst.
+                    *o = unsafe { out_ptr.0.add(dst[r0 + r] as usize * c_dst + j0) };
+                }
+                let rows = &srcs[r0..r0 + r_count];
+                macro_rules! rows {
+                    ($($r:literal)*) => {
+                        match r_count {
+                            // SAFETY: each source row holds c_src floats, the panel c_src rows of
+                            // 32; the destination rows are the caller's block's, each once per
+                            // offset.
+                            $($r => unsafe { rows_times_panel::<$r>(rows, c_src, panel, &outs[..$r], cols, accumulate) },)*
+                            _ => unreachable!(),
+                        }
+                    };
+                }
+                rows!(1 2 3 4 5 6 7 8 9 10 11 12);
+            }
+        }
+    };
     let written_once = identity.is_none() && scatter_side.len() == n_dst && {
         let mut seen = vec![false; n_dst];
         scatter_side.iter().all(|&r| !std::mem::replace(&mut seen[r as usize], true))
@@ -315,8 +388,8 @@ pub fn pair_conv(
         // one parallel region, not one per offset.
         let block_rows = (n_dst / (BLOCKS_PER_THREAD * rayon::current_num_threads())).clamp(MIN_BLOCK_ROWS, MAX_BLOCK_ROWS);
         (0..n_dst.div_ceil(block_rows)).into_par_iter().for_each_init(
-            || scratch::<f32>(block_rows * c_src),
-            |tile, block| {
+            || Vec::<*const f32>::with_capacity(block_rows),
+            |srcs, block| {
                 let (r0, r1) = (block * block_rows, ((block + 1) * block_rows).min(n_dst));
                 match identity {
                     Some(k) => multiply(k, 0..panels, src[r0 * c_src..].as_ptr(), c_src, r1 - r0, &[], r0, false),
@@ -324,18 +397,14 @@ pub fn pair_conv(
                     // SAFETY: rows r0..r1 are this block's.
                     None => unsafe { std::ptr::write_bytes(out_ptr.0.add(r0 * c_dst), 0, (r1 - r0) * c_dst) },
                 }
-                let tile = tile.as_mut_ptr().cast::<f32>();
                 for k in (0..volume).filter(|&k| Some(k) != identity) {
                     let (s, e) = (pairs.start[k], pairs.start[k + 1]);
                     let dst = &scatter_side[s..e];
                     let a = s + dst.partition_point(|&r| (r as usize) < r0);
                     let b = s + dst.partition_point(|&r| (r as usize) < r1);
-                    for (j, &r) in gather_side[a..b].iter().enumerate() {
-                        // SAFETY: row r of the source and row j < block_rows of the tile (each
-                        // destination row appears once per offset).
-                        unsafe { std::ptr::copy_nonoverlapping(src.as_ptr().add(r as usize * c_src), tile.add(j * c_src), c_src) };
-                    }
-                    multiply(k, 0..panels, tile, c_src, b - a, &scatter_side[a..b], 0, !written_once);
+                    srcs.clear();
+                    srcs.extend(gather_side[a..b].iter().map(|&r| src.as_ptr().wrapping_add(r as usize * c_src)));
+                    multiply_in_place(k, srcs, &scatter_side[a..b], !written_once);
                 }
                 if let Some(e) = epilogue {
                     // SAFETY: the block's rows, all written above (see below), this task's only.
