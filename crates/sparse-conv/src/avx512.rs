@@ -108,6 +108,24 @@ fn mask(cols: usize, v: usize) -> __mmask16 {
     if c >= 16 { 0xFFFF } else { ((1u32 << c) - 1) as u16 }
 }
 
+/// Adds a register row (two vectors, lanes `m0`, `m1`) to the 32 floats at `o`, or, without
+/// `accumulate`, writes it there: the end of every micro-kernel here.
+///
+/// # Safety
+/// AVX-512F; the masked lanes at `o` writable (and, to accumulate, initialised).
+#[inline(always)]
+unsafe fn store_row(o: *mut f32, acc: [__m512; 2], m0: __mmask16, m1: __mmask16, accumulate: bool) {
+    unsafe {
+        let (mut v0, mut v1) = (acc[0], acc[1]);
+        if accumulate {
+            v0 = _mm512_add_ps(_mm512_maskz_loadu_ps(m0, o), v0);
+            v1 = _mm512_add_ps(_mm512_maskz_loadu_ps(m1, o.add(16)), v1);
+        }
+        _mm512_mask_storeu_ps(o, m0, v0);
+        _mm512_mask_storeu_ps(o.add(16), m1, v1);
+    }
+}
+
 /// `out[i][j] (+)= (Σ_p x[p][i] · g[p][j])` for `R` rows `i0..i0 + R` and the `cols` (≤ 32)
 /// columns from `j0`, over the pairs' rows `xs[p]`, `gs[p]`; with `accumulate` false `out` is
 /// written without being read.
@@ -143,15 +161,8 @@ unsafe fn pair_outer_products<const R: usize>(
                 acc[r][1] = _mm512_fmadd_ps(a, b1, acc[r][1]);
             }
         }
-        for (r, acc) in acc.iter().enumerate() {
-            let o = out.add((i0 + r) * ld + j0);
-            let (mut v0, mut v1) = (acc[0], acc[1]);
-            if accumulate {
-                v0 = _mm512_add_ps(_mm512_maskz_loadu_ps(m0, o), v0);
-                v1 = _mm512_add_ps(_mm512_maskz_loadu_ps(m1, o.add(16)), v1);
-            }
-            _mm512_mask_storeu_ps(o, m0, v0);
-            _mm512_mask_storeu_ps(o.add(16), m1, v1);
+        for (r, &acc) in acc.iter().enumerate() {
+            store_row(out.add((i0 + r) * ld + j0), acc, m0, m1, accumulate);
         }
     }
 }
@@ -182,14 +193,7 @@ unsafe fn tile_times_panel<const R: usize>(a: *const f32, lda: usize, kc: usize,
             panel = panel.wrapping_add(NR);
         }
         for r in 0..R {
-            let o = out[r];
-            let (mut v0, mut v1) = (acc[r][0], acc[r][1]);
-            if accumulate {
-                v0 = _mm512_add_ps(_mm512_maskz_loadu_ps(m0, o), v0);
-                v1 = _mm512_add_ps(_mm512_maskz_loadu_ps(m1, o.add(16)), v1);
-            }
-            _mm512_mask_storeu_ps(o, m0, v0);
-            _mm512_mask_storeu_ps(o.add(16), m1, v1);
+            store_row(out[r], acc[r], m0, m1, accumulate);
         }
     }
 }
@@ -218,14 +222,7 @@ unsafe fn rows_times_panel<const R: usize>(rows: &[*const f32], kc: usize, panel
             panel = panel.wrapping_add(NR);
         }
         for r in 0..R {
-            let o = out[r];
-            let (mut v0, mut v1) = (acc[r][0], acc[r][1]);
-            if accumulate {
-                v0 = _mm512_add_ps(_mm512_maskz_loadu_ps(m0, o), v0);
-                v1 = _mm512_add_ps(_mm512_maskz_loadu_ps(m1, o.add(16)), v1);
-            }
-            _mm512_mask_storeu_ps(o, m0, v0);
-            _mm512_mask_storeu_ps(o.add(16), m1, v1);
+            store_row(out[r], acc[r], m0, m1, accumulate);
         }
     }
 }
