@@ -341,12 +341,11 @@ pub fn pair_conv(
     // run.
     let multiply_in_place = |k: usize, srcs: &[*const f32], dst: &[u32], accumulate: bool| {
         let mut outs = [std::ptr::null_mut::<f32>(); MR];
-        let lines_per_tile = MR * c_src.div_ceil(16);
-        let per_call = lines_per_tile.div_ceil(panels);
         for r0 in (0..srcs.len()).step_by(MR) {
             let r_count = MR.min(srcs.len() - r0);
             let next = (r0 + MR).min(srcs.len())..(r0 + 2 * MR).min(srcs.len());
             let mut prefetch = RowPrefetch::new(&srcs[next], c_src);
+            let per_call = prefetch.lines().div_ceil(panels);
             for p in 0..panels {
                 let (j0, panel) = (p * NR, panel_of(k, p));
                 let cols = NR.min(c_dst - j0);
