@@ -24,7 +24,7 @@ fn small() -> CenterPointConfig {
 fn shapes_follow_the_grid() {
     let batch = sim_batch("cp-shapes", 2, 6, 4.5, 3);
     let device = Device::flex();
-    let model = small().init(&device);
+    let model = common::initialised(&device, None, || small().init(&device));
     assert_eq!(model.grid().size, [96, 96, 1]);
     assert_eq!(model.bev(&batch, &device).dims(), [2, 16, 96, 96]);
     assert_eq!(model.forward(&batch, &device).dims(), [2, 9, 48, 48]);
@@ -42,8 +42,7 @@ fn overfits_simulated_frames_and_checkpoint_round_trips() {
     assert!(valid_gt(&batch) >= 3, "the crop holds people: {}", valid_gt(&batch));
     let device = Device::flex().autodiff();
     // Seeded initialisation: the test's outcome must not depend on the run.
-    device.seed(7);
-    let model = small().init(&device);
+    let model = common::initialised(&device, Some(7), || small().init(&device));
     let (model, losses) = train(model, &batch, &device, 60, 3e-3);
     let (first, last) = head_tail(&losses, 5);
     eprintln!("CenterPoint loss {first:.3} → {last:.3}");

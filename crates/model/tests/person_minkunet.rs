@@ -17,7 +17,7 @@ fn unet_levels_keep_their_coordinates() {
     let batch = sim_batch("unet", 2, 8, 10.0, 5);
     let device = Device::flex();
     let cfg = small();
-    let model = cfg.init(&device);
+    let model = common::initialised(&device, None, || cfg.init(&device));
     let input = PersonMinkUNet::input(&batch, &device);
     let levels = model.backbone.forward_levels(input);
     let cs = cfg.backbone().scaled_channels();
@@ -55,10 +55,9 @@ fn overfits_simulated_frames_and_checkpoint_round_trips() {
     let batch = sim_batch("pmu-fit", 2, 16, 5.0, 11);
     assert!(valid_gt(&batch) >= 3, "the crop holds people: {}", valid_gt(&batch));
     let device = Device::flex().autodiff();
-    device.seed(7);
     // The paper's loss weighting (cls × 1): with the code's × 100 the regression needs far more
     // than a test-sized budget of steps to be fitted.
-    let model = PersonMinkUNetConfig { cls_weight: 1.0, ..small() }.init(&device);
+    let model = common::initialised(&device, Some(7), || PersonMinkUNetConfig { cls_weight: 1.0, ..small() }.init(&device));
     let (model, losses) = train(model, &batch, &device, 150, 4e-3);
     let (first, last) = head_tail(&losses, 5);
     eprintln!("Person-MinkUNet loss {first:.3} → {last:.3} on {} voxels", batch.num_voxels());

@@ -10,6 +10,22 @@ use rand::SeedableRng;
 use sparse_conv::burn::optim::{AdamConfig, GradientsParams};
 use sparse_conv::burn::tensor::Device;
 
+/// The model `init` builds, its weights drawn (with `seed`, from the backend's generator seeded
+/// first) under a lock that every model of the test binary is built under: the generator is one
+/// per process and tests run on parallel threads, so another test's draws in between would change
+/// the seeded weights. Burn draws a parameter's weights when it is first read, not in `init`, so
+/// they are read (through a record) before the lock is let go.
+pub fn initialised<M: sparse_conv::burn::module::Module>(device: &Device, seed: Option<u64>, init: impl FnOnce() -> M) -> M {
+    static RNG: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    let _rng = RNG.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+    if let Some(seed) = seed {
+        device.seed(seed);
+    }
+    let model = init();
+    let record = model.clone().into_record();
+    model.load_record(record)
+}
+
 /// `frames` simulated frames (one sequence), points and boxes cropped to `radius` metres in BEV,
 /// voxelized without augmentation, as one batch.
 pub fn sim_batch(name: &str, frames: usize, max_people: usize, radius: f32, seed: u64) -> Batch {
