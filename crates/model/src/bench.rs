@@ -66,6 +66,10 @@ pub struct BenchReport {
     pub detect_ms: Option<f64>,
     /// Median training step (forward, loss, backward, Adam), ms.
     pub train_step_ms: Option<f64>,
+    /// Mean inference forward and training step over the same runs, ms: the whole the kernel
+    /// times (means too) are a part of, whatever outliers the runs had.
+    pub forward_mean_ms: Option<f64>,
+    pub train_step_mean_ms: Option<f64>,
     /// Peak RSS after the inference runs (forward's peak), MiB.
     pub peak_forward_mib: Option<f64>,
     /// Peak RSS after the training steps (the process's peak), MiB.
@@ -111,6 +115,8 @@ struct Figures {
     forward_ms: Option<f64>,
     detect_ms: Option<f64>,
     train_step_ms: Option<f64>,
+    forward_mean_ms: Option<f64>,
+    train_step_mean_ms: Option<f64>,
     peak_forward_mib: Option<f64>,
     peak_train_mib: Option<f64>,
     forward_kernels: Option<KernelTimes>,
@@ -118,15 +124,16 @@ struct Figures {
     train_phases: Option<StepPhases>,
 }
 
-/// Median of `runs` calls of `f` after `warmup` untimed ones, and the mean kernel times of the
-/// timed calls.
-fn timed_with_kernels(warmup: usize, runs: usize, mut f: impl FnMut()) -> (f64, KernelTimes) {
+/// Median and mean of `runs` calls of `f` after `warmup` untimed ones, and the mean kernel times
+/// of the timed calls.
+fn timed_with_kernels(warmup: usize, runs: usize, mut f: impl FnMut()) -> (f64, f64, KernelTimes) {
     for _ in 0..warmup {
         f();
     }
-    let before = KernelTimes::now();
+    let (before, start) = (KernelTimes::now(), Instant::now());
     let ms = median_ms(0, runs, f);
-    (ms, KernelTimes::now().per_run_since(&before, runs))
+    let mean_ms = start.elapsed().as_secs_f64() * 1e3 / runs.max(1) as f64;
+    (ms, mean_ms, KernelTimes::now().per_run_since(&before, runs))
 }
 
 /// Times `model` (built on `device.autodiff()`) on `batch`; inference runs on its `valid()` copy.
@@ -135,10 +142,10 @@ fn measure<M: Detector>(mut model: M, batch: &Batch, device: &Device, parts: Par
     if parts != Parts::Training {
         let inner = device.clone().inner();
         let eval = model.valid();
-        let (ms, kernels) = timed_with_kernels(warmup, runs, || {
+        let (ms, mean_ms, kernels) = timed_with_kernels(warmup, runs, || {
             std::hint::black_box(eval.head_output(batch, &inner));
         });
-        (figures.forward_ms, figures.forward_kernels) = (Some(ms), Some(kernels));
+        (figures.forward_ms, figures.forward_mean_ms, figures.forward_kernels) = (Some(ms), Some(mean_ms), Some(kernels));
         figures.detect_ms = Some(median_ms(0, runs.min(3), || {
             std::hint::black_box(eval.detect(batch, &inner));
         }));
@@ -164,8 +171,8 @@ fn measure<M: Detector>(mut model: M, batch: &Batch, device: &Device, parts: Par
             step();
         }
         phases.set([0.0; 3]);
-        let (ms, kernels) = timed_with_kernels(0, runs, &mut step);
-        (figures.train_step_ms, figures.train_kernels) = (Some(ms), Some(kernels));
+        let (ms, mean_ms, kernels) = timed_with_kernels(0, runs, &mut step);
+        (figures.train_step_ms, figures.train_step_mean_ms, figures.train_kernels) = (Some(ms), Some(mean_ms), Some(kernels));
         let [forward_ms, backward_ms, optimizer_ms] = phases.get().map(|s| s / runs as f64);
         figures.train_phases = Some(StepPhases { forward_ms, backward_ms, optimizer_ms });
         figures.peak_train_mib = Some(peak_rss_mb());
@@ -177,7 +184,7 @@ fn measure<M: Detector>(mut model: M, batch: &Batch, device: &Device, parts: Par
 /// autodiff twin).
 pub fn run(cfg: &ModelConfig, batch: &Batch, device: &Device, backend: &str, parts: Parts, warmup: usize, runs: usize) -> BenchReport {
     let ad = device.clone().autodiff();
-    let (parameters, Figures { forward_ms, detect_ms, train_step_ms, peak_forward_mib, peak_train_mib, forward_kernels, train_kernels, train_phases }) = match cfg {
+    let (parameters, Figures { forward_ms, detect_ms, train_step_ms, forward_mean_ms, train_step_mean_ms, peak_forward_mib, peak_train_mib, forward_kernels, train_kernels, train_phases }) = match cfg {
         ModelConfig::PersonMinkunet(c) => {
             let m = c.init(&ad);
             (m.num_params(), measure(m, batch, &ad, parts, warmup, runs))
@@ -197,6 +204,8 @@ pub fn run(cfg: &ModelConfig, batch: &Batch, device: &Device, backend: &str, par
         forward_ms,
         detect_ms,
         train_step_ms,
+        forward_mean_ms,
+        train_step_mean_ms,
         peak_forward_mib,
         peak_train_mib,
         forward_kernels,

@@ -99,7 +99,7 @@ fn main() -> anyhow::Result<()> {
         );
         if let (Some(forward), Some(detect), Some(peak)) = (r.forward_ms, r.detect_ms, r.peak_forward_mib) {
             println!("  inference forward   {forward:>10.1} ms   (detect incl. decode + NMS {detect:.1} ms)");
-            print_kernels(r.forward_kernels, forward);
+            print_kernels(r.forward_kernels, r.forward_mean_ms);
             println!("  peak RSS            {peak:>10.0} MiB after inference");
         }
         if let (Some(step), Some(peak)) = (r.train_step_ms, r.peak_train_mib) {
@@ -107,18 +107,19 @@ fn main() -> anyhow::Result<()> {
             if let Some(p) = r.train_phases {
                 println!("    forward + loss {:.1} ms, backward {:.1} ms, Adam {:.1} ms (means)", p.forward_ms, p.backward_ms, p.optimizer_ms);
             }
-            print_kernels(r.train_kernels, step);
+            print_kernels(r.train_kernels, r.train_step_mean_ms);
             println!("  peak RSS            {peak:>10.0} MiB after training");
         }
     }
     Ok(())
 }
 
-/// The mean time inside the CPU kernels, and the rest of the median wall time.
-fn print_kernels(k: Option<KernelTimes>, wall_ms: f64) {
-    let Some(k) = k.filter(|k| k.total_ms() > 0.0) else { return };
+/// The mean time inside the CPU kernels, and the rest of the mean wall time of the same runs (a
+/// median would leave a slow run's kernel time out of the whole but not out of the part).
+fn print_kernels(k: Option<KernelTimes>, mean_wall_ms: Option<f64>) {
+    let (Some(k), Some(wall_ms)) = (k.filter(|k| k.total_ms() > 0.0), mean_wall_ms) else { return };
     println!(
-        "    in the kernels {:.1} ms (maps {:.1}, conv fwd {:.1}, input grad {:.1}, weight grad {:.1}, batch norm {:.1}); outside them {:.1} ms",
+        "    in the kernels {:.1} ms (maps {:.1}, conv fwd {:.1}, input grad {:.1}, weight grad {:.1}, batch norm {:.1}); outside them {:.1} ms (means)",
         k.total_ms(),
         k.map_build_ms,
         k.conv_forward_ms,
