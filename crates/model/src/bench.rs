@@ -66,9 +66,10 @@ pub struct BenchReport {
     pub detect_ms: Option<f64>,
     /// Median training step (forward, loss, backward, Adam), ms.
     pub train_step_ms: Option<f64>,
-    /// Mean inference forward and training step over the same runs, ms: the whole the kernel
-    /// times (means too) are a part of, whatever outliers the runs had.
+    /// Mean inference forward over the same runs, ms: the whole the kernel times (means too) are
+    /// a part of, whatever outliers the runs had.
     pub forward_mean_ms: Option<f64>,
+    /// Mean training step over the same runs, ms (as `forward_mean_ms`).
     pub train_step_mean_ms: Option<f64>,
     /// Peak RSS after the inference runs (forward's peak), MiB.
     pub peak_forward_mib: Option<f64>,

@@ -77,26 +77,27 @@ struct RowPrefetch<'a> {
     len: usize,
     row: usize,
     line: usize,
-    /// Asks for the lines to be written (PREFETCHW): the line comes in owned, so the stores that
-    /// follow do not wait for it.
-    write: bool,
-    /// Asks for read lines into L2 only (T1), for data needed later than the next tile.
-    l2: bool,
+    hint: Hint,
+}
+
+/// What a [`RowPrefetch`] asks its lines for.
+#[derive(Clone, Copy)]
+enum Hint {
+    /// To read next: into L1 (T0).
+    Read,
+    /// To read later than the next tile: into L2 (T1).
+    ReadLater,
+    /// To write (PREFETCHW): the line comes in owned, so the stores that follow do not wait for it.
+    Write,
 }
 
 impl<'a> RowPrefetch<'a> {
     fn new(rows: &'a [*const f32], len: usize) -> Self {
-        Self { rows, len, row: 0, line: 0, write: false, l2: false }
+        Self::with_hint(rows, len, Hint::Read)
     }
 
-    /// Read lines for later: into L2.
-    fn into_l2(self) -> Self {
-        Self { l2: true, ..self }
-    }
-
-    /// Lines to be written, not read.
-    fn for_writing(rows: &'a [*const f32], len: usize) -> Self {
-        Self { write: true, ..Self::new(rows, len) }
+    fn with_hint(rows: &'a [*const f32], len: usize, hint: Hint) -> Self {
+        Self { rows, len, row: 0, line: 0, hint }
     }
 
     /// Lines in all.
@@ -110,16 +111,12 @@ impl<'a> RowPrefetch<'a> {
         for _ in 0..count {
             let Some(&row) = self.rows.get(self.row) else { return };
             let p = row.wrapping_add(self.line);
-            if self.write {
-                // SAFETY: a prefetch of any address is harmless; PREFETCHW is on every CPU with
-                // AVX-512F.
-                unsafe { std::arch::asm!("prefetchw [{p}]", p = in(reg) p, options(nostack, readonly, preserves_flags)) };
-            } else if self.l2 {
-                // SAFETY: a prefetch (SSE, any x86-64 CPU) of any address is harmless.
-                unsafe { _mm_prefetch::<_MM_HINT_T1>(p.cast()) };
-            } else {
-                // SAFETY: as above.
-                unsafe { _mm_prefetch::<_MM_HINT_T0>(p.cast()) };
+            // SAFETY: a prefetch of any address is harmless; T0 and T1 are SSE (any x86-64 CPU),
+            // PREFETCHW is on every CPU with AVX-512F.
+            match self.hint {
+                Hint::Read => unsafe { _mm_prefetch::<_MM_HINT_T0>(p.cast()) },
+                Hint::ReadLater => unsafe { _mm_prefetch::<_MM_HINT_T1>(p.cast()) },
+                Hint::Write => unsafe { std::arch::asm!("prefetchw [{p}]", p = in(reg) p, options(nostack, readonly, preserves_flags)) },
             }
             self.line += 16;
             if self.line >= self.len {
@@ -143,7 +140,7 @@ impl<'a> BlockAhead<'a> {
     /// `src` and `dst` each one contiguous run of `src_len`, `dst_len` floats, spread over
     /// `calls` tile calls.
     fn new(src: &'a [*const f32; 1], src_len: usize, dst: &'a [*const f32; 1], dst_len: usize, calls: usize) -> Self {
-        let (src, dst) = (RowPrefetch::new(src, src_len).into_l2(), RowPrefetch::for_writing(dst, dst_len));
+        let (src, dst) = (RowPrefetch::with_hint(src, src_len, Hint::ReadLater), RowPrefetch::with_hint(dst, dst_len, Hint::Write));
         let per_call = (src.lines().div_ceil(calls.max(1)), dst.lines().div_ceil(calls.max(1)));
         Self { src, dst, per_call }
     }
@@ -406,15 +403,14 @@ pub fn pair_conv(
         let mut next_outs = [std::ptr::null::<f32>(); MR];
         for r0 in (0..srcs.len()).step_by(MR) {
             let r_count = MR.min(srcs.len() - r0);
-            let next = (r0 + MR).min(srcs.len())..(r0 + 2 * MR).min(srcs.len());
             // The identity's rows were asked for a block ahead ([`BlockAhead`]).
-            let next = if contiguous { r0..r0 } else { next };
+            let next = if contiguous { r0..r0 } else { (r0 + MR).min(srcs.len())..(r0 + 2 * MR).min(srcs.len()) };
             let next_written = if accumulate { 0 } else { next.len() };
             for (o, &r) in next_outs.iter_mut().zip(&dst[next.clone()]).take(next_written) {
                 *o = out_ptr.0.wrapping_add(r as usize * c_dst);
             }
             let mut prefetch = RowPrefetch::new(&srcs[next], c_src);
-            let mut prefetch_out = RowPrefetch::for_writing(&next_outs[..next_written], c_dst);
+            let mut prefetch_out = RowPrefetch::with_hint(&next_outs[..next_written], c_dst, Hint::Write);
             let (per_call, out_per_call) = (prefetch.lines().div_ceil(panels), prefetch_out.lines().div_ceil(panels));
             for p in 0..panels {
                 let (j0, panel) = (p * NR, panel_of(k, p));
