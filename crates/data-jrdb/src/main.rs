@@ -5,7 +5,7 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use clap::{Parser, Subcommand};
-use data_jrdb::sim::{SynthConfig, synth};
+use data_jrdb::sim::{Preset, SynthConfig, synth};
 use data_jrdb::{DatasetConfig, Encoding, JrdbDataset, Split, VoxelConfig, convention, stats};
 
 #[derive(Parser)]
@@ -20,6 +20,12 @@ enum Enc {
     Ascii,
     Binary,
     BinaryCompressed,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum PresetArg {
+    /// 160 sequences × 10 frames: 1,200 training and 400 validation frames from disjoint scenes.
+    BenchV1,
 }
 
 #[derive(Subcommand)]
@@ -44,6 +50,10 @@ enum Cmd {
         /// PCD encoding.
         #[arg(long, value_enum, default_value_t = Enc::Binary)]
         encoding: Enc,
+        /// A named benchmark: its sequences, frames and naming replace --sequences, --frames
+        /// and --max-people (--seed still applies).
+        #[arg(long, value_enum)]
+        preset: Option<PresetArg>,
     },
     /// Print frames, points, voxels and boxes per frame and points per box of a tree.
     Stats {
@@ -75,14 +85,17 @@ fn open_all(root: &std::path::Path, sequences: Option<Vec<String>>) -> anyhow::R
 
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.cmd {
-        Cmd::Synth { out, sequences, frames, seed, max_people, encoding } => {
+        Cmd::Synth { out, sequences, frames, seed, max_people, encoding, preset } => {
             let encoding = match encoding {
                 Enc::Ascii => Encoding::Ascii,
                 Enc::Binary => Encoding::Binary,
                 Enc::BinaryCompressed => Encoding::BinaryCompressed,
             };
             let t = Instant::now();
-            let cfg = SynthConfig { sequences, frames, seed, max_people, encoding, ..Default::default() };
+            let cfg = match preset {
+                Some(PresetArg::BenchV1) => SynthConfig { encoding, ..Preset::BenchV1.synth(seed) },
+                None => SynthConfig { sequences, frames, seed, max_people, encoding, ..Default::default() },
+            };
             let s = synth(&out, &cfg)?;
             println!(
                 "wrote {} sequences, {} frames, {} points, {} boxes to {} in {:.1} s",

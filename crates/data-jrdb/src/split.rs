@@ -110,13 +110,21 @@ impl Layout {
     }
 }
 
-/// The sequences of `split` among `present`, given the validation list.
+/// Whether `seq` is listed in `val`, where an entry ending in `*` matches by prefix.
+pub fn is_listed(seq: &str, val: &[String]) -> bool {
+    val.iter().any(|v| match v.strip_suffix('*') {
+        Some(prefix) => seq.starts_with(prefix),
+        None => v == seq,
+    })
+}
+
+/// The sequences of `split` among `present`, given the validation list (see [`is_listed`]).
 pub fn select_sequences(present: &[String], split: Split, val: &[String]) -> Vec<String> {
     present
         .iter()
         .filter(|s| match split {
-            Split::Train => !val.contains(s),
-            Split::Val => val.contains(s),
+            Split::Train => !is_listed(s, val),
+            Split::Val => is_listed(s, val),
             Split::TrainVal => true,
         })
         .cloned()
@@ -134,5 +142,9 @@ mod tests {
         assert_eq!(select_sequences(&present, Split::Val, &val), ["huang-2-2019-01-25_0"]);
         assert_eq!(select_sequences(&present, Split::Train, &val), ["bytes-cafe-2019-02-07_0", "x"]);
         assert_eq!(select_sequences(&present, Split::TrainVal, &val).len(), 3);
+        let bench: Vec<String> = ["sim-train-hall-000", "sim-val-plaza-001", "sim-valx"].map(String::from).to_vec();
+        let pattern = vec!["sim-val-*".to_string()];
+        assert_eq!(select_sequences(&bench, Split::Val, &pattern), ["sim-val-plaza-001"]);
+        assert_eq!(select_sequences(&bench, Split::Train, &pattern), ["sim-train-hall-000", "sim-valx"]);
     }
 }

@@ -67,6 +67,9 @@ pub enum Interpolation {
 pub struct Protocol {
     /// GT and detections with `x² + z² > r²` are ignored; `None` (**not official**) turns the filter off.
     pub max_range: Option<f64>,
+    /// **Not official**: GT and detections with `x² + z² ≤ r²` are ignored too, so that
+    /// `min_range..max_range` scores one range band (official: `None`).
+    pub min_range: Option<f64>,
     /// GT with fewer points are ignored (official: 10).
     pub min_points: i32,
     /// How the precision slots are averaged.
@@ -78,6 +81,7 @@ impl Protocol {
     pub fn official() -> Self {
         Protocol {
             max_range: Some(25.0),
+            min_range: None,
             min_points: 10,
             interpolation: Interpolation::Official40,
         }
@@ -146,8 +150,10 @@ enum DetState {
     Ignored,
 }
 
-fn beyond(o: &KittiObject, max_range: Option<f64>) -> bool {
-    max_range.is_some_and(|r| o.range_sq() > r * r)
+/// Outside the protocol's range: beyond `max_range`, or within `min_range` of the sensor.
+fn beyond(o: &KittiObject, p: &Protocol) -> bool {
+    let r2 = o.range_sq();
+    p.max_range.is_some_and(|r| r2 > r * r) || p.min_range.is_some_and(|r| r2 <= r * r)
 }
 
 /// Step 1 for a GT line. Class: `Pedestrian` valid, anything else (incl. `Person_sitting`,
@@ -155,7 +161,7 @@ fn beyond(o: &KittiObject, max_range: Option<f64>) -> bool {
 fn classify_gt(g: &KittiObject, p: &Protocol) -> GtState {
     if g.num_points < 0 {
         GtState::Dropped
-    } else if g.is_pedestrian() && g.num_points >= p.min_points && !beyond(g, p.max_range) {
+    } else if g.is_pedestrian() && g.num_points >= p.min_points && !beyond(g, p) {
         GtState::Valid
     } else {
         GtState::Ignored
@@ -165,7 +171,7 @@ fn classify_gt(g: &KittiObject, p: &Protocol) -> GtState {
 /// Step 1 for a detection: the range test comes first, so an out-of-range line of any class
 /// is "ignored" (it can absorb a match), an in-range non-pedestrian is never considered.
 fn classify_det(d: &KittiObject, p: &Protocol) -> DetState {
-    if beyond(d, p.max_range) {
+    if beyond(d, p) {
         DetState::Ignored
     } else if d.is_pedestrian() {
         DetState::Valid

@@ -79,6 +79,9 @@ impl Report {
             Some(r) => parts.push(format!("range {r} m (non-official)")),
             None => parts.push("no range filter (non-official)".to_string()),
         }
+        if let Some(r) = self.protocol.min_range {
+            parts.push(format!("beyond {r} m only (non-official)"));
+        }
         if self.protocol.min_points != 10 {
             parts.push(format!(
                 "min {} points (non-official)",

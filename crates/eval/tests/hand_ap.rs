@@ -255,6 +255,22 @@ fn no_range_filter_counts_far_objects() {
 }
 
 #[test]
+fn a_range_band_ignores_what_lies_inside_it() {
+    // 40 perfect detections (all at least 8 m out), plus a GT at 1 m that nothing detects and a
+    // false positive at 1.5 m above every score. Officially both count against the AP; in the
+    // band beyond 3 m both are ignored and the 40 perfect ones give 39/40.
+    let mut f = row(40);
+    f.gt.push(gt(person(1.0, 0.0), 50));
+    f.det.push(det(person(0.0, 1.5), 0.999));
+    let band = Protocol {
+        min_range: Some(3.0),
+        ..Protocol::official()
+    };
+    close(evaluate(std::slice::from_ref(&f), 0.3, Overlap::Box3d, &band).ap, 39.0 / 40.0);
+    assert!(ap(&[f], 0.3) < 39.0 / 40.0 - 0.01);
+}
+
+#[test]
 fn bev_ignores_height() {
     // A detection at the right place but 2 m too high: 3D IoU 0, BEV IoU 1.
     let mut f = row(40);

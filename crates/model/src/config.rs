@@ -90,6 +90,14 @@ pub struct PostProcessConfig {
     pub iou_threshold: f64,
     /// At most this many boxes per sample after NMS; `None` keeps all survivors.
     pub max_boxes: Option<usize>,
+    /// At most this many candidates (the best-scoring) enter NMS; `None`: all that pass the
+    /// threshold (the authors'). Bounds NMS's cost and the near-duplicates it must resolve.
+    pub pre_nms_max: Option<usize>,
+    /// Box voting after NMS: each kept box's centre and size become the score-weighted mean of
+    /// the candidates whose nearest kept centre it is, within this BEV radius (metres); 0: off
+    /// (the authors'). Per-voxel proposals scatter around a person, and the best-scoring one is
+    /// not the best-placed one; their mean is.
+    pub merge_radius: f64,
 }
 
 impl Default for PostProcessConfig {
@@ -102,6 +110,8 @@ impl Default for PostProcessConfig {
             circle_radius: 0.3,
             iou_threshold: 0.3,
             max_boxes: None,
+            pre_nms_max: None,
+            merge_radius: 0.0,
         }
     }
 }

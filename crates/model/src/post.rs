@@ -1,4 +1,7 @@
-//! Post-processing shared by both detectors: score threshold, NMS, cap.
+//! Post-processing shared by both detectors: score threshold, candidate cap, NMS, box voting,
+//! output cap.
+
+use std::collections::HashMap;
 
 use data_jrdb::Box3d;
 use eval::nms::{NmsConfig, nms_bev_iou, nms_distance};
@@ -20,8 +23,13 @@ impl PostProcessConfig {
     }
 
     /// Keeps the candidates that pass the threshold and survive NMS, best first, at most
-    /// `max_boxes`.
+    /// `max_boxes`; with `pre_nms_max` only the best-scoring candidates enter NMS, and with
+    /// `merge_radius > 0` each kept box is the score-weighted mean of its neighbours.
     pub fn apply(&self, boxes: Vec<Box3d>, scores: Vec<f32>) -> Detections {
+        let (boxes, scores) = match self.pre_nms_max {
+            Some(k) if boxes.len() > k => best_k(boxes, scores, k),
+            _ => (boxes, scores),
+        };
         let cfg = self.nms_config();
         let kept = match self.nms {
             NmsKind::Distance => nms_distance(&boxes, &scores, &cfg),
@@ -29,8 +37,69 @@ impl PostProcessConfig {
             NmsKind::Circle => nms_circle(&boxes, &scores, self.circle_radius, &cfg),
             NmsKind::None => nms_circle(&boxes, &scores, 0.0, &cfg),
         };
-        Detections { boxes: kept.iter().map(|&i| boxes[i]).collect(), scores: kept.iter().map(|&i| scores[i]).collect() }
+        let kept_boxes = if self.merge_radius > 0.0 {
+            vote(&boxes, &scores, &kept, self.merge_radius, self.score_threshold)
+        } else {
+            kept.iter().map(|&i| boxes[i]).collect()
+        };
+        Detections { boxes: kept_boxes, scores: kept.iter().map(|&i| scores[i]).collect() }
     }
+}
+
+/// The `k` best-scoring candidates, in their input order (ties: the earlier wins).
+fn best_k(boxes: Vec<Box3d>, scores: Vec<f32>, k: usize) -> (Vec<Box3d>, Vec<f32>) {
+    let mut idx: Vec<usize> = (0..boxes.len()).collect();
+    idx.sort_by(|&a, &b| scores[b].total_cmp(&scores[a]));
+    idx.truncate(k);
+    idx.sort_unstable();
+    (idx.iter().map(|&i| boxes[i]).collect(), idx.iter().map(|&i| scores[i]).collect())
+}
+
+/// Box voting: every candidate above `threshold` votes, with its score as weight, for the kept
+/// box whose centre is nearest in BEV if that lies within `radius`; a kept box becomes the
+/// weighted mean of its voters' centres and sizes (it votes for itself, so it always has one).
+/// The heading stays the kept box's: the votes' headings may differ by π, whose mean means nothing.
+pub fn vote(boxes: &[Box3d], scores: &[f32], kept: &[usize], radius: f64, threshold: f64) -> Vec<Box3d> {
+    let key = |b: &Box3d| ((b.cx / radius).floor() as i64, (b.cy / radius).floor() as i64);
+    let mut grid: HashMap<(i64, i64), Vec<usize>> = HashMap::new();
+    for (slot, &i) in kept.iter().enumerate() {
+        grid.entry(key(&boxes[i])).or_default().push(slot);
+    }
+    // Weighted sums of cx, cy, cz, l, w, h and the weight, per kept box.
+    let mut sums = vec![[0.0f64; 7]; kept.len()];
+    for (i, b) in boxes.iter().enumerate() {
+        let s = scores[i] as f64;
+        if s.is_nan() || s <= threshold {
+            continue;
+        }
+        let (kx, ky) = key(b);
+        let mut best: Option<(f64, usize)> = None;
+        for dx in -1..=1 {
+            for dy in -1..=1 {
+                for &slot in grid.get(&(kx + dx, ky + dy)).into_iter().flatten() {
+                    let k = &boxes[kept[slot]];
+                    let d = (k.cx - b.cx).hypot(k.cy - b.cy);
+                    if d <= radius && best.is_none_or(|(bd, _)| d < bd) {
+                        best = Some((d, slot));
+                    }
+                }
+            }
+        }
+        if let Some((_, slot)) = best {
+            let acc = &mut sums[slot];
+            for (a, v) in acc.iter_mut().zip([b.cx, b.cy, b.cz, b.l, b.w, b.h, 1.0]) {
+                *a += s * v;
+            }
+        }
+    }
+    kept.iter()
+        .zip(&sums)
+        .map(|(&i, acc)| {
+            let w = acc[6];
+            let m = |k: usize| acc[k] / w;
+            Box3d { cx: m(0), cy: m(1), cz: m(2), l: m(3), w: m(4), h: m(5), ..boxes[i] }
+        })
+        .collect()
 }
 
 /// CenterPoint's circle NMS: greedy by descending score (ties in input order), a candidate is
@@ -72,6 +141,24 @@ mod tests {
             assert_eq!(d.boxes[0], boxes[1]);
         }
         let none = PostProcessConfig { nms: NmsKind::None, max_boxes: Some(2), ..Default::default() };
-        assert_eq!(none.apply(boxes, scores).scores, vec![0.9, 0.8]);
+        assert_eq!(none.apply(boxes.clone(), scores.clone()).scores, vec![0.9, 0.8]);
+        // Only the 2 best candidates enter NMS: 0.9 (suppressing nothing else left) and 0.8.
+        let capped = PostProcessConfig { pre_nms_max: Some(2), ..Default::default() };
+        assert_eq!(capped.apply(boxes, scores).scores, vec![0.9, 0.8]);
+    }
+
+    #[test]
+    fn voting_moves_a_kept_box_to_its_neighbours_weighted_mean() {
+        let boxes = vec![at(0.0, 0.0), at(0.2, 0.0), at(0.0, 0.3), at(3.0, 0.0), at(3.0, 0.1)];
+        let scores = vec![0.6, 0.3, 0.1, 0.5, 0.0005];
+        let post = PostProcessConfig { nms: NmsKind::Circle, circle_radius: 1.0, merge_radius: 0.5, ..Default::default() };
+        let d = post.apply(boxes, scores);
+        assert_eq!(d.scores, vec![0.6, 0.5], "NMS keeps the two people, scores unchanged");
+        // (0.6·0 + 0.3·0.2 + 0.1·0) / 1.0 and (0.6·0 + 0.3·0 + 0.1·0.3) / 1.0, up to the f32 scores.
+        assert!((d.boxes[0].cx - 0.06).abs() < 1e-7 && (d.boxes[0].cy - 0.03).abs() < 1e-7, "{:?}", d.boxes[0]);
+        // The candidate below the threshold does not vote.
+        assert_eq!(d.boxes[1], at(3.0, 0.0));
+        let off = PostProcessConfig { merge_radius: 0.0, ..post };
+        assert_eq!(off.apply(vec![at(0.0, 0.0), at(0.2, 0.0)], vec![0.6, 0.3]).boxes[0], at(0.0, 0.0));
     }
 }

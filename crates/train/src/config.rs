@@ -79,13 +79,15 @@ pub struct DataConfig {
     pub train_split: Split,
     /// Split validated on.
     pub val_split: Split,
-    /// The validation sequences (default: JRDB's 7, spec §1.2).
+    /// The validation sequences (default: JRDB's 7, spec §1.2); an entry ending in `*` matches
+    /// every sequence that starts with what precedes it (`sim-val-*` for a simulated benchmark).
     pub val_sequences: Vec<String>,
     /// Voxel size in metres (x, y, z).
     pub voxel_size: [f32; 3],
     /// A voxel's feature: the first point's xyz (the authors') or the mean.
     pub pooling: Pooling,
-    /// Training voxel cap per frame (30,000); no cap at evaluation.
+    /// Training voxel cap per frame (30,000), drawn at random; 0: no cap. Evaluation never caps,
+    /// so a cap trains on sparser frames than it is scored on.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub max_voxels: Option<usize>,
     /// Training augmentation (spec §1.5).
@@ -120,7 +122,7 @@ impl DataConfig {
         SampleConfig {
             voxel: VoxelConfig { voxel_size: self.voxel_size, pooling: self.pooling },
             augment: self.augment.enabled.then_some(AugmentConfig { scale: self.augment.scale, rotate: self.augment.rotate }),
-            max_voxels: self.max_voxels,
+            max_voxels: self.max_voxels.filter(|&m| m > 0),
         }
     }
 
@@ -149,37 +151,59 @@ impl Default for AugmentSection {
 }
 
 /// The simulated dataset generated when `data.root` is missing (deterministic by `seed`).
+///
+/// `preset = "bench-v1"` names the simulated benchmark (`data_jrdb::sim::Preset`); keys written
+/// beside it override the preset's values, keys left out take the preset's (or, without a
+/// preset, the plain defaults below).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SimulateConfig {
-    /// Sequences; every fourth from the second gets a validation name.
-    pub sequences: usize,
-    /// Frames per sequence.
-    pub frames: usize,
+    /// A named benchmark the other keys start from.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub preset: Option<data_jrdb::sim::Preset>,
+    /// Sequences (8 without a preset); each is its own scene.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sequences: Option<usize>,
+    /// Frames per sequence (30 without a preset).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub frames: Option<usize>,
     /// Seed of the scenes and scans.
     pub seed: u64,
-    /// Most people per scene.
-    pub max_people: usize,
-    /// People farther than this (BEV metres) are not labelled.
-    pub label_range: f64,
+    /// Most people per scene (40 without a preset).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_people: Option<usize>,
+    /// People farther than this (BEV metres) are not labelled (35 without a preset).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub label_range: Option<f64>,
+    /// Simulation steps of 1/15 s between written frames (1 without a preset).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub frame_step: Option<usize>,
+    /// Sequence names: `jrdb` (JRDB's, its default split) or `benchmark` (`sim-val-*` for validation).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub naming: Option<data_jrdb::sim::Naming>,
 }
 
 impl Default for SimulateConfig {
     fn default() -> Self {
-        Self { sequences: 8, frames: 30, seed: 0, max_people: 40, label_range: 35.0 }
+        Self { preset: None, sequences: None, frames: None, seed: 0, max_people: None, label_range: None, frame_step: None, naming: None }
     }
 }
 
 impl SimulateConfig {
-    /// The simulator's own config.
+    /// The simulator's own config: the preset's (or the plain defaults), then the keys set here.
     pub fn synth(&self) -> data_jrdb::sim::SynthConfig {
+        let base = match self.preset {
+            Some(p) => p.synth(self.seed),
+            None => data_jrdb::sim::SynthConfig { sequences: 8, frames: 30, seed: self.seed, ..Default::default() },
+        };
         data_jrdb::sim::SynthConfig {
-            sequences: self.sequences,
-            frames: self.frames,
-            seed: self.seed,
-            max_people: self.max_people,
-            label_range: self.label_range,
-            ..Default::default()
+            sequences: self.sequences.unwrap_or(base.sequences),
+            frames: self.frames.unwrap_or(base.frames),
+            max_people: self.max_people.unwrap_or(base.max_people),
+            label_range: self.label_range.unwrap_or(base.label_range),
+            frame_step: self.frame_step.unwrap_or(base.frame_step),
+            naming: self.naming.unwrap_or(base.naming),
+            ..base
         }
     }
 }
@@ -403,6 +427,18 @@ mod tests {
         let back = RunConfig::from_toml_str(&c.to_toml().unwrap()).unwrap();
         assert_eq!(c, back);
         assert!(c.to_toml().unwrap().contains("epochs = 40"), "defaults are written out");
+    }
+
+    #[test]
+    fn a_preset_fills_what_the_section_leaves_out() {
+        let c = RunConfig::from_toml_str(&format!("{MIN}[data.simulate]\npreset = \"bench-v1\"\nseed = 7\nframes = 2\n")).unwrap();
+        let s = c.data.simulate.as_ref().unwrap().synth();
+        let bench = data_jrdb::sim::Preset::BenchV1.synth(7);
+        assert_eq!(s, data_jrdb::sim::SynthConfig { frames: 2, ..bench });
+        let plain = RunConfig::from_toml_str(&format!("{MIN}[data.simulate]\nsequences = 3\n")).unwrap();
+        let s = plain.data.simulate.unwrap().synth();
+        assert_eq!((s.sequences, s.frames, s.max_people, s.frame_step), (3, 30, 40, 1));
+        assert!(RunConfig::from_toml_str(&format!("{MIN}[data.simulate]\npreset = \"bench-v9\"\n")).is_err());
     }
 
     #[test]

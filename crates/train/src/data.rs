@@ -29,14 +29,16 @@ pub fn ensure_dataset(cfg: &DataConfig) -> Result<Option<SynthSummary>> {
     if let Some(parent) = tmp.parent() {
         std::fs::create_dir_all(parent)?;
     }
+    let synth_cfg = sim.synth();
     eprintln!(
-        "generating the simulated dataset ({} sequences × {} frames, seed {}) at {}",
-        sim.sequences,
-        sim.frames,
-        sim.seed,
+        "generating the simulated dataset{} ({} sequences × {} frames, seed {}) at {}",
+        sim.preset.map_or_else(String::new, |p| format!(" {}", serde_json::to_value(p).map(|v| v.as_str().unwrap_or("").to_string()).unwrap_or_default())),
+        synth_cfg.sequences,
+        synth_cfg.frames,
+        synth_cfg.seed,
         cfg.root.display()
     );
-    let summary = synth(&tmp, &sim.synth()).with_context(|| format!("simulating into {}", tmp.display()))?;
+    let summary = synth(&tmp, &synth_cfg).with_context(|| format!("simulating into {}", tmp.display()))?;
     std::fs::rename(&tmp, &cfg.root).with_context(|| format!("renaming {} to {}", tmp.display(), cfg.root.display()))?;
     Ok(Some(summary))
 }

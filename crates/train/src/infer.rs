@@ -25,7 +25,8 @@ use crate::checkpoint::{CheckpointFiles, Checkpoints, Slot, best_or_latest};
 use crate::data::{ensure_dataset, eval_loader};
 use crate::render::render_frames;
 use crate::run_dir::RunDir;
-use crate::validate::{FrameResult, score, detect_split};
+use crate::config::RunConfig;
+use crate::validate::{FrameResult, HeadingError, RANGE_BANDS, ap3d_by_range, detect_split, format_by_range, score};
 
 /// What to infer.
 #[derive(Debug, Clone)]
@@ -40,6 +41,12 @@ pub struct InferOptions {
     pub backend: Option<BackendKind>,
     /// Progress bars and the report table on stderr.
     pub verbose: bool,
+    /// Run on this JRDB-format tree instead of the run's own `data.root` (never simulated).
+    pub data_root: Option<PathBuf>,
+    /// Config overrides (`model.post.merge_radius=0.4`), as `--set` of training.
+    pub set: Vec<String>,
+    /// Write detections here instead of `<run>/detections/<split>/`.
+    pub out: Option<PathBuf>,
 }
 
 /// What inference wrote and scored.
@@ -53,6 +60,10 @@ pub struct InferOutput {
     pub table: String,
     /// Frames scored.
     pub frames: usize,
+    /// AP3D at 0.3/0.5/0.7 per range band (`validate::RANGE_BANDS`).
+    pub ap3d_by_range: [[f64; 3]; 3],
+    /// Heading error of matched detections.
+    pub heading: Option<HeadingError>,
 }
 
 /// The split's folder name.
@@ -66,7 +77,12 @@ pub fn split_name(split: Split) -> &'static str {
 
 /// Loads the run's model from a checkpoint and writes, scores and draws its detections.
 pub fn infer(run: &RunDir, opts: &InferOptions) -> Result<InferOutput> {
-    let mut cfg = run.config()?;
+    let mut cfg = if opts.set.is_empty() { run.config()? } else { RunConfig::load(&run.config_file(), &opts.set)? };
+    if let Some(root) = &opts.data_root {
+        anyhow::ensure!(root.exists(), "--data-root {}: no such folder", root.display());
+        cfg.data.root = root.clone();
+        cfg.data.simulate = None;
+    }
     if let Some(b) = opts.backend {
         cfg.backend = b;
     }
@@ -82,25 +98,38 @@ pub fn infer(run: &RunDir, opts: &InferOptions) -> Result<InferOutput> {
     }
 }
 
-fn infer_model<D: Detector>(model: D, files: &CheckpointFiles, run: &RunDir, cfg: &crate::config::RunConfig, opts: &InferOptions, device: &Device) -> Result<InferOutput> {
+fn infer_model<D: Detector>(model: D, files: &CheckpointFiles, run: &RunDir, cfg: &RunConfig, opts: &InferOptions, device: &Device) -> Result<InferOutput> {
     let model = files.load_model(model)?.valid();
     ensure_dataset(&cfg.data)?;
     let loader = eval_loader(cfg, opts.split)?;
     let frames = detect_split(&model, &loader, device, opts.verbose)?;
-    let dir = run.detections(split_name(opts.split));
-    let report = write_results(&frames, &dir, &cfg.eval.protocol())?;
+    let dir = opts.out.clone().unwrap_or_else(|| run.detections(split_name(opts.split)));
+    let protocol = cfg.eval.protocol();
+    let report = write_results(&frames, &dir, &protocol)?;
+    let by_range = ap3d_by_range(&frames, &protocol);
+    let heading = HeadingError::of(&frames, &protocol);
     let mut eval_json = report.to_json();
     if let Some(obj) = eval_json.as_object_mut() {
         obj.insert("checkpoint".into(), json!(files.dir.file_name().map(|n| n.to_string_lossy().into_owned())));
         obj.insert("split".into(), json!(split_name(opts.split)));
+        obj.insert("data_root".into(), json!(cfg.data.root));
+        let bands: serde_json::Map<String, serde_json::Value> = RANGE_BANDS
+            .iter()
+            .zip(&by_range)
+            .map(|((lo, hi), a)| (format!("{lo:.0}-{hi:.0}"), json!({"0.3": a[0], "0.5": a[1], "0.7": a[2]})))
+            .collect();
+        obj.insert("ap3d_by_range_non_official".into(), serde_json::Value::Object(bands));
+        obj.insert("heading".into(), json!(heading));
+        obj.insert("overrides".into(), json!(opts.set));
     }
     std::fs::write(dir.join("eval.json"), serde_json::to_string_pretty(&eval_json)?)?;
-    let table = report.to_table();
+    let heading_text = heading.map_or_else(|| "no matched box".to_string(), |h| h.to_string());
+    let table = format!("{}\nAP3D by range (non-official): {}\n{heading_text}\n", report.to_table().trim_end(), format_by_range(&by_range));
     std::fs::write(dir.join("eval.txt"), &table)?;
     if opts.render > 0 {
         render_frames(loader.dataset(), &frames[..opts.render.min(frames.len())], &run.renders(split_name(opts.split)), cfg.eval.max_range)?;
     }
-    Ok(InferOutput { dir, ap3d: [report.ap3d[0].ap, report.ap3d[1].ap, report.ap3d[2].ap], table, frames: frames.len() })
+    Ok(InferOutput { dir, ap3d: [report.ap3d[0].ap, report.ap3d[1].ap, report.ap3d[2].ap], table, frames: frames.len(), ap3d_by_range: by_range, heading })
 }
 
 /// Writes frame results as pmunet JSON (`json/`), official detection txt (`kitti/`) and GT txt

@@ -91,6 +91,17 @@ enum Cmd {
         /// Backend (overrides the run's).
         #[arg(long, value_enum)]
         backend: Option<BackendKind>,
+        /// Run on this JRDB-format tree (e.g. a simulated benchmark generated with another seed)
+        /// instead of the run's own data.
+        #[arg(long, value_name = "DIR")]
+        data_root: Option<PathBuf>,
+        /// Override a key of the run's config for this inference, e.g.
+        /// `--set model.post.merge_radius=0.4` (repeatable; the run's config.toml is unchanged).
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        set: Vec<String>,
+        /// Write the detections and scores here instead of RUN/detections/SPLIT.
+        #[arg(long, value_name = "DIR")]
+        out: Option<PathBuf>,
     },
     /// Run a sweep file: variants × seeds, then results.csv, results.md and curves.png.
     Sweep {
@@ -159,7 +170,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let r = match cli.cmd {
         None => run_train(cli.train),
-        Some(Cmd::Infer { run, split, checkpoint, render, backend }) => (|| -> Result<()> {
+        Some(Cmd::Infer { run, split, checkpoint, render, backend, data_root, set, out }) => (|| -> Result<()> {
             let dir = RunDir::at(&run);
             let b = backend.unwrap_or(dir.config()?.backend);
             pin(b);
@@ -172,7 +183,7 @@ fn main() -> ExitCode {
                 SlotArg::Best => Slot::Best,
                 SlotArg::Latest => Slot::Latest,
             });
-            let out = train::infer(&dir, &InferOptions { split, checkpoint, render, backend, verbose: true })?;
+            let out = train::infer(&dir, &InferOptions { split, checkpoint, render, backend, verbose: true, data_root, set, out })?;
             println!("{}", out.table);
             println!("{} frames; detections and scores in {}", out.frames, out.dir.display());
             Ok(())

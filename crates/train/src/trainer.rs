@@ -25,7 +25,7 @@ use crate::config::{OptimizerConfig, RunConfig};
 use crate::data::{batches_from, ensure_dataset, eval_loader, train_loader};
 use crate::metrics::{CsvLog, epoch_header, field, step_header, truncate_after};
 use crate::run_dir::{RunDir, write_atomic};
-use crate::validate::validate;
+use crate::validate::{HeadingError, format_by_range, validate};
 use crate::{plots, progress};
 
 /// Overrides of one invocation (not part of the config: they do not change what the run is).
@@ -64,6 +64,13 @@ pub struct TrainSummary {
     pub best_ap3d_03: Option<(f64, usize)>,
     /// Cumulative training time, seconds (validation excluded).
     pub train_seconds: f64,
+    /// AP3D at 0.3/0.5/0.7 per range band (`validate::RANGE_BANDS`) of this invocation's last
+    /// validation.
+    #[serde(default)]
+    pub last_ap3d_by_range: Option<[[f64; 3]; 3]>,
+    /// Heading error of the same validation.
+    #[serde(default)]
+    pub last_heading: Option<HeadingError>,
 }
 
 /// Builds Adam from the config: [`FusedAdamConfig`], Burn's Adam in one pass per parameter.
@@ -138,6 +145,7 @@ pub fn train_model<D: Detector>(mut model: D, cfg: &RunConfig, run: &RunDir, opt
     let mut step_log: Option<CsvLog> = None;
     let mut epoch_log: Option<CsvLog> = None;
     let mut saved_step = state.step;
+    let (mut last_by_range, mut last_heading) = (None, None);
     if opts.verbose {
         eprintln!("{name}: {} ({} parameters), {} train frames / {} val frames, {n} steps per epoch, backend {:?}", cfg.model.kind(), params, loader.dataset().len(), val_loader.dataset().len(), cfg.backend);
     }
@@ -231,6 +239,14 @@ pub fn train_model<D: Detector>(mut model: D, cfg: &RunConfig, run: &RunDir, opt
             let parts: Vec<String> = names.iter().map(|n| format!("{n} {:.4}", mean(n).unwrap_or(f64::NAN))).collect();
             let ap_text = ap.map_or_else(String::new, |a| format!("  AP3D@0.3/0.5/0.7 {:.1}/{:.1}/{:.1}", 100.0 * a[0], 100.0 * a[1], 100.0 * a[2]));
             eprintln!("epoch {done}/{epochs}  loss {:.4} ({})  lr {lr_end:.2e}{ap_text}  {:.0} s", mean("loss").unwrap_or(f64::NAN), parts.join(", "), state.epoch_seconds);
+            if let Some(v) = &val {
+                let heading = v.heading.map_or_else(|| "no matched box".to_string(), |h| h.to_string());
+                eprintln!("  AP3D by range {}; {heading}", format_by_range(&v.ap3d_by_range));
+            }
+        }
+        if let Some(v) = &val {
+            last_by_range = Some(v.ap3d_by_range);
+            last_heading = v.heading;
         }
         state.epoch = done;
         state.batch = 0;
@@ -264,6 +280,8 @@ pub fn train_model<D: Detector>(mut model: D, cfg: &RunConfig, run: &RunDir, opt
         last_epoch: state.last_val.map(|(_, e)| e),
         best_ap3d_03: state.best,
         train_seconds: state.time,
+        last_ap3d_by_range: last_by_range,
+        last_heading,
     };
     write_atomic(&run.summary_json(), serde_json::to_string_pretty(&summary)?.as_bytes()).context("writing summary.json")?;
     Ok(summary)

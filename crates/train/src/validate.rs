@@ -48,11 +48,79 @@ impl FrameResult {
     }
 }
 
+/// BEV range bands (metres) AP is also reported in: near, middle and far of the official 25 m,
+/// since far people are where detectors differ.
+pub const RANGE_BANDS: [(f64, f64); 3] = [(0.0, 10.0), (10.0, 20.0), (20.0, 25.0)];
+
+/// How well matched detections are oriented.
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize, serde::Deserialize)]
+pub struct HeadingError {
+    /// Valid GT boxes matched by a detection (greedy by score, 3D IoU > 0.3, as the AP matches).
+    pub matched: usize,
+    /// Median |θ_det − θ_gt| in degrees, in [0, 180].
+    pub median_deg: f64,
+    /// Median of the same difference taken modulo 180° (the box's axis), in [0, 90]: all IoU sees.
+    pub median_axis_deg: f64,
+}
+
+impl HeadingError {
+    /// Matches `frames`' detections to their valid GT (official filters of `protocol`) and takes
+    /// the median heading errors; `None` when nothing matched.
+    pub fn of(frames: &[FrameResult], protocol: &Protocol) -> Option<HeadingError> {
+        let mut errors: Vec<f64> = Vec::new();
+        for f in frames {
+            let valid: Vec<&Box3d> = f
+                .gt
+                .iter()
+                .zip(&f.num_points)
+                .filter(|(b, n)| **n >= protocol.min_points as i64 && protocol.max_range.is_none_or(|r| b.bev_range() <= r))
+                .map(|(b, _)| b)
+                .collect();
+            let mut taken = vec![false; valid.len()];
+            // Detections are best first.
+            for d in &f.detections {
+                let best = valid
+                    .iter()
+                    .enumerate()
+                    .filter(|(i, _)| !taken[*i])
+                    .map(|(i, g)| (i, eval::geometry::iou_3d(&d.bbox, g)))
+                    .filter(|(_, iou)| *iou > 0.3)
+                    .max_by(|a, b| a.1.total_cmp(&b.1));
+                if let Some((i, _)) = best {
+                    taken[i] = true;
+                    let diff = (d.bbox.rot_z - valid[i].rot_z).rem_euclid(std::f64::consts::TAU);
+                    errors.push(diff.min(std::f64::consts::TAU - diff));
+                }
+            }
+        }
+        if errors.is_empty() {
+            return None;
+        }
+        let median = |mut v: Vec<f64>| {
+            v.sort_by(f64::total_cmp);
+            let n = v.len();
+            if n % 2 == 1 { v[n / 2] } else { 0.5 * (v[n / 2 - 1] + v[n / 2]) }
+        };
+        let axis: Vec<f64> = errors.iter().map(|e| e.min(std::f64::consts::PI - e)).collect();
+        Some(HeadingError { matched: errors.len(), median_deg: median(errors).to_degrees(), median_axis_deg: median(axis).to_degrees() })
+    }
+}
+
+impl std::fmt::Display for HeadingError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "median heading error {:.1}° ({:.1}° of the axis) over {} matched boxes", self.median_deg, self.median_axis_deg, self.matched)
+    }
+}
+
 /// The outcome of one validation.
 #[derive(Debug, Clone)]
 pub struct Validation {
     /// AP3D at IoU 0.3, 0.5, 0.7 (fractions in [0, 1]).
     pub ap3d: [f64; 3],
+    /// AP3D at IoU 0.3, 0.5, 0.7 in each of [`RANGE_BANDS`] (not an official metric).
+    pub ap3d_by_range: [[f64; 3]; 3],
+    /// Heading error of matched detections.
+    pub heading: Option<HeadingError>,
     /// The whole report (APBEV, per-sequence AP, counts, PR curves).
     pub report: Report,
     /// Per-frame results, in split order.
@@ -87,13 +155,34 @@ pub fn score(frames: &[FrameResult], protocol: &Protocol) -> Report {
     Report::compute(&eval_frames, protocol)
 }
 
+/// AP3D at IoU 0.3, 0.5, 0.7 in each of [`RANGE_BANDS`], `protocol` otherwise.
+pub fn ap3d_by_range(frames: &[FrameResult], protocol: &Protocol) -> [[f64; 3]; 3] {
+    let eval_frames: Vec<Frame> = frames.iter().map(FrameResult::to_eval_frame).collect();
+    RANGE_BANDS.map(|(lo, hi)| {
+        let band = Protocol { min_range: (lo > 0.0).then_some(lo), max_range: Some(hi), ..*protocol };
+        eval::ap::IOU_THRESHOLDS.map(|t| eval::ap::evaluate(&eval_frames, t, eval::ap::Overlap::Box3d, &band).ap)
+    })
+}
+
+/// One line of AP by range band, in percent: `0–10 m 81.2/40.1/3.0  10–20 m …`.
+pub fn format_by_range(by_range: &[[f64; 3]; 3]) -> String {
+    RANGE_BANDS
+        .iter()
+        .zip(by_range)
+        .map(|((lo, hi), a)| format!("{lo:.0}–{hi:.0} m {:.1}/{:.1}/{:.1}", 100.0 * a[0], 100.0 * a[1], 100.0 * a[2]))
+        .collect::<Vec<_>>()
+        .join("  ")
+}
+
 /// Detects and scores a split.
 pub fn validate<D: Detector>(model: &D, loader: &Loader, device: &Device, protocol: &Protocol, show_progress: bool) -> Result<Validation> {
     let t0 = Instant::now();
     let frames = detect_split(model, loader, device, show_progress)?;
     let report = score(&frames, protocol);
     let ap3d = [report.ap3d[0].ap, report.ap3d[1].ap, report.ap3d[2].ap];
-    Ok(Validation { ap3d, report, frames, seconds: t0.elapsed().as_secs_f64() })
+    let ap3d_by_range = ap3d_by_range(&frames, protocol);
+    let heading = HeadingError::of(&frames, protocol);
+    Ok(Validation { ap3d, ap3d_by_range, heading, report, frames, seconds: t0.elapsed().as_secs_f64() })
 }
 
 #[cfg(test)]

@@ -113,6 +113,8 @@ fn fake_summary(dir: &Path, ap: f64, finished: bool) -> TrainSummary {
         last_epoch: Some(2),
         best_ap3d_03: Some((ap, 2)),
         train_seconds: 5.0,
+        last_ap3d_by_range: None,
+        last_heading: None,
     };
     std::fs::write(dir.join("summary.json"), serde_json::to_string(&s).unwrap()).unwrap();
     std::fs::write(dir.join("epochs.csv"), format!("epoch,ap3d_0.3\n1,{}\n2,{ap}\n", ap / 2.0)).unwrap();

@@ -6,4 +6,4 @@ pub mod people;
 pub mod scene;
 pub mod writer;
 
-pub use writer::{SynthConfig, SynthSummary, sequence_names, synth};
+pub use writer::{Naming, Preset, SynthConfig, SynthSummary, names_for, sequence_names, synth};

@@ -21,8 +21,8 @@ pub enum SceneKind {
 impl SceneKind {
     /// The kind a JRDB sequence name suggests.
     pub fn for_sequence(name: &str) -> Self {
-        const CORRIDORS: [&str; 2] = ["basement", "elevators"];
-        const HALLS: [&str; 9] = ["cafe", "auditorium", "aud", "lab", "meeting", "poster", "stlc", "huang-2", "gates-159"];
+        const CORRIDORS: [&str; 3] = ["basement", "elevators", "corridor"];
+        const HALLS: [&str; 10] = ["cafe", "auditorium", "aud", "lab", "meeting", "poster", "stlc", "huang-2", "gates-159", "hall"];
         if CORRIDORS.iter().any(|k| name.contains(k)) {
             SceneKind::Corridor
         } else if HALLS.iter().any(|k| name.contains(k)) {

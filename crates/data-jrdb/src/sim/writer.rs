@@ -33,11 +33,67 @@ pub struct SynthConfig {
     pub encoding: Encoding,
     /// People farther than this (BEV, metres) are not labelled.
     pub label_range: f64,
+    /// Simulation steps (of `1 / fps`) between written frames: 1 writes consecutive scans, more
+    /// spreads a sequence's frames over more of its time (less alike, as JRDB's subsampled sets).
+    pub frame_step: usize,
+    /// How sequences are named, which decides their split and kind of place.
+    pub naming: Naming,
+}
+
+/// Names of simulated sequences.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Naming {
+    /// JRDB's own names (train names, every fourth from the second a validation name), so JRDB's
+    /// default split applies; the kind of place is read from the name. At most 27 distinct.
+    #[default]
+    Jrdb,
+    /// `sim-<train|val>-<corridor|hall|plaza>-NNN`: every fourth sequence from the second is a
+    /// validation one (select them with `sim-val-*`), places in turn (2 halls, 2 plazas, 1
+    /// corridor in 5), any number of sequences.
+    Benchmark,
+}
+
+/// The named simulated benchmarks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Preset {
+    /// `bench-v1`: 160 sequences (one scene each) of 10 frames a third of a second apart, 0–40
+    /// people; 120 training sequences (1,200 frames) and 40 validation ones (400 frames) from
+    /// scenes disjoint from them.
+    BenchV1,
+}
+
+impl Preset {
+    /// The preset's simulation with `seed`.
+    pub fn synth(self, seed: u64) -> SynthConfig {
+        match self {
+            Preset::BenchV1 => SynthConfig {
+                sequences: 160,
+                frames: 10,
+                seed,
+                max_people: 40,
+                frame_step: 5,
+                naming: Naming::Benchmark,
+                ..SynthConfig::default()
+            },
+        }
+    }
 }
 
 impl Default for SynthConfig {
     fn default() -> Self {
-        Self { sequences: 2, frames: 10, seed: 0, max_people: 40, fps: 15.0, encoding: Encoding::Binary, label_range: 35.0 }
+        Self {
+            sequences: 2,
+            frames: 10,
+            seed: 0,
+            max_people: 40,
+            fps: 15.0,
+            encoding: Encoding::Binary,
+            label_range: 35.0,
+            frame_step: 1,
+            naming: Naming::Jrdb,
+        }
     }
 }
 
@@ -62,6 +118,20 @@ pub fn sequence_names(n: usize) -> Vec<String> {
         .collect()
 }
 
+/// The sequence names `naming` gives `n` sequences.
+pub fn names_for(naming: Naming, n: usize) -> Vec<String> {
+    match naming {
+        Naming::Jrdb => sequence_names(n),
+        Naming::Benchmark => (0..n)
+            .map(|i| {
+                let split = if i % 4 == 1 { "val" } else { "train" };
+                let place = ["hall", "plaza", "hall", "plaza", "corridor"][i % 5];
+                format!("sim-{split}-{place}-{i:03}")
+            })
+            .collect(),
+    }
+}
+
 fn mix(a: u64, b: u64) -> u64 {
     let mut z = a ^ b.wrapping_mul(0x9E37_79B9_7F4A_7C15).wrapping_add(0x632B_E59B_D9B4_E019);
     z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
@@ -80,7 +150,10 @@ pub fn synth(out: &Path, cfg: &SynthConfig) -> Result<SynthSummary> {
     mkdir(&out.join("calibration"))?;
     calib.write(&layout.calibration_file())?;
     mkdir(&out.join("labels").join("labels_3d"))?;
-    let names = sequence_names(cfg.sequences);
+    if cfg.frame_step == 0 {
+        return Err(DataError::new(out, crate::error::ErrorKind::Layout("frame_step must be at least 1".into())));
+    }
+    let names = names_for(cfg.naming, cfg.sequences);
     let mut summary = SynthSummary { sequences: names.clone(), ..Default::default() };
     // Sequences one after another; the rays of each scan run in parallel.
     for (si, seq) in names.iter().enumerate() {
@@ -108,7 +181,9 @@ fn synth_sequence(layout: &Layout, seq: &str, index: u64, cfg: &SynthConfig, cal
     let (mut n_points, mut n_boxes) = (0, 0);
     for fi in 0..cfg.frames {
         if fi > 0 {
-            scene.step(dt, &mut rng);
+            for _ in 0..cfg.frame_step {
+                scene.step(dt, &mut rng);
+            }
         }
         let (people, views) = scene.people_now();
         let prims: Vec<_> = scene.statics.iter().copied().chain(people).collect();
@@ -150,7 +225,7 @@ fn synth_sequence(layout: &Layout, seq: &str, index: u64, cfg: &SynthConfig, cal
         }
         n_boxes += frame_labels.len();
         labels.insert(format!("{name}.pcd"), frame_labels);
-        times.push(FrameTime { frame_id: fi as u64, timestamp: t0 + fi as f64 * dt });
+        times.push(FrameTime { frame_id: fi as u64, timestamp: t0 + (fi * cfg.frame_step) as f64 * dt });
     }
     write_labels(&layout.labels_file(seq), &labels)?;
     write_timestamps(&layout.timestamps_file(seq), seq, &times)?;
