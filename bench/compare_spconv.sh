@@ -16,7 +16,7 @@
 #                   odd rounds and last in even ones); the table gives each figure's median over the
 #                   rounds and each ratio's median and range over the rounds' own ratios, so both
 #                   sides of a ratio are measured in the same minutes (default 1).
-#   --scene FILE    int32 N×4 .npy (default ../shared/bench/scene_jrdb_like.npy from the repo root).
+#   --scene FILE    int32 N×4 .npy (default bench/scene_jrdb_like.npy from the repo root).
 #   --out DIR       results folder (default bench/results/<date-time>/).
 #   --quick         few runs and no MinkUNet: a test of the scripts, not a measurement.
 #
@@ -38,7 +38,7 @@ ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 cd "$ROOT" || die "cannot cd to $ROOT"
 
 INSTALL=0 QUICK=0 THREADS=2 RUNS="" WARMUP="" MODEL_RUNS=3 MODEL_WARMUP=1 BACKENDS=flex,ndarray ROUNDS=1
-SCENE=../shared/bench/scene_jrdb_like.npy OUT=""
+SCENE=bench/scene_jrdb_like.npy OUT=""
 VENV=${PMUNET_PEER_VENV:-$HOME/.cache/spconv-peer}
 
 need() { [[ $# -ge 2 && -n $2 ]] || die "$1 needs a value"; }

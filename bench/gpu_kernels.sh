@@ -3,7 +3,7 @@
 # CubeCL's profiler (which synchronises and times every kernel launch, so the figures are each
 # kernel alone, without Burn's host work between launches).
 #
-#   bash bench/gpu_kernels.sh [CHANNELS] [SCALE] [COORDS]     (defaults: 128 1 ../shared/bench/scene_jrdb_like.npy)
+#   bash bench/gpu_kernels.sh [CHANNELS] [SCALE] [COORDS]     (defaults: 128 1 bench/scene_jrdb_like.npy)
 #
 # Needs a Vulkan GPU (or any adapter wgpu finds). Set PMUNET_GPU_TILED_MIN_CUBES=0 to time the
 # tiled gather at every size.
@@ -11,7 +11,7 @@ set -euo pipefail
 channels=${1:-128}
 scale=${2:-1}
 root=$(cd "$(dirname "$0")/.." && pwd)
-coords=$(realpath "${3:-$root/../shared/bench/scene_jrdb_like.npy}")
+coords=$(realpath "${3:-$root/bench/scene_jrdb_like.npy}")
 bench=${SPARSE_CONV_BENCH:-}   # a prebuilt benchmark binary, else it is built here
 if [ -z "$bench" ]; then
     (cd "$root" && cargo build -q -p sparse-conv --bin sparse-conv-bench)

@@ -98,6 +98,10 @@ pub struct PostProcessConfig {
     /// (the authors'). Per-voxel proposals scatter around a person, and the best-scoring one is
     /// not the best-placed one; their mean is.
     pub merge_radius: f64,
+    /// With voting, also vote the heading's axis (angles doubled, so votes π apart agree), keeping
+    /// the kept box's own direction along it. A per-voxel heading is a noisy guess; the axis of
+    /// a whole person's votes is not, and IoU depends on the axis alone.
+    pub merge_heading: bool,
 }
 
 impl Default for PostProcessConfig {
@@ -112,6 +116,7 @@ impl Default for PostProcessConfig {
             max_boxes: None,
             pre_nms_max: None,
             merge_radius: 0.0,
+            merge_heading: true,
         }
     }
 }

@@ -38,7 +38,7 @@ impl PostProcessConfig {
             NmsKind::None => nms_circle(&boxes, &scores, 0.0, &cfg),
         };
         let kept_boxes = if self.merge_radius > 0.0 {
-            vote(&boxes, &scores, &kept, self.merge_radius, self.score_threshold)
+            vote(&boxes, &scores, &kept, self.merge_radius, self.score_threshold, self.merge_heading)
         } else {
             kept.iter().map(|&i| boxes[i]).collect()
         };
@@ -58,15 +58,17 @@ fn best_k(boxes: Vec<Box3d>, scores: Vec<f32>, k: usize) -> (Vec<Box3d>, Vec<f32
 /// Box voting: every candidate above `threshold` votes, with its score as weight, for the kept
 /// box whose centre is nearest in BEV if that lies within `radius`; a kept box becomes the
 /// weighted mean of its voters' centres and sizes (it votes for itself, so it always has one).
-/// The heading stays the kept box's: the votes' headings may differ by π, whose mean means nothing.
-pub fn vote(boxes: &[Box3d], scores: &[f32], kept: &[usize], radius: f64, threshold: f64) -> Vec<Box3d> {
+/// With `axis`, the heading becomes the weighted mean axis of the voters' headings (the mean of
+/// `(cos 2θ, sin 2θ)`: votes π apart agree), turned to the side of the kept box's own heading;
+/// without, it stays the kept box's.
+pub fn vote(boxes: &[Box3d], scores: &[f32], kept: &[usize], radius: f64, threshold: f64, axis: bool) -> Vec<Box3d> {
     let key = |b: &Box3d| ((b.cx / radius).floor() as i64, (b.cy / radius).floor() as i64);
     let mut grid: HashMap<(i64, i64), Vec<usize>> = HashMap::new();
     for (slot, &i) in kept.iter().enumerate() {
         grid.entry(key(&boxes[i])).or_default().push(slot);
     }
-    // Weighted sums of cx, cy, cz, l, w, h and the weight, per kept box.
-    let mut sums = vec![[0.0f64; 7]; kept.len()];
+    // Weighted sums of cx, cy, cz, l, w, h, the weight, cos 2θ and sin 2θ, per kept box.
+    let mut sums = vec![[0.0f64; 9]; kept.len()];
     for (i, b) in boxes.iter().enumerate() {
         let s = scores[i] as f64;
         if s.is_nan() || s <= threshold {
@@ -87,7 +89,8 @@ pub fn vote(boxes: &[Box3d], scores: &[f32], kept: &[usize], radius: f64, thresh
         }
         if let Some((_, slot)) = best {
             let acc = &mut sums[slot];
-            for (a, v) in acc.iter_mut().zip([b.cx, b.cy, b.cz, b.l, b.w, b.h, 1.0]) {
+            let (s2, c2) = (2.0 * b.rot_z).sin_cos();
+            for (a, v) in acc.iter_mut().zip([b.cx, b.cy, b.cz, b.l, b.w, b.h, 1.0, c2, s2]) {
                 *a += s * v;
             }
         }
@@ -97,7 +100,16 @@ pub fn vote(boxes: &[Box3d], scores: &[f32], kept: &[usize], radius: f64, thresh
         .map(|(&i, acc)| {
             let w = acc[6];
             let m = |k: usize| acc[k] / w;
-            Box3d { cx: m(0), cy: m(1), cz: m(2), l: m(3), w: m(4), h: m(5), ..boxes[i] }
+            let own = boxes[i].rot_z;
+            let rot_z = if axis && acc[7].hypot(acc[8]) > 1e-9 {
+                let phi = 0.5 * acc[8].atan2(acc[7]);
+                // φ or φ + π, whichever is nearer the kept box's heading, in the same turn as it.
+                let d = (phi - own + std::f64::consts::FRAC_PI_2).rem_euclid(std::f64::consts::PI) - std::f64::consts::FRAC_PI_2;
+                own + d
+            } else {
+                own
+            };
+            Box3d { cx: m(0), cy: m(1), cz: m(2), l: m(3), w: m(4), h: m(5), rot_z, ..boxes[i] }
         })
         .collect()
 }
@@ -158,7 +170,25 @@ mod tests {
         assert!((d.boxes[0].cx - 0.06).abs() < 1e-7 && (d.boxes[0].cy - 0.03).abs() < 1e-7, "{:?}", d.boxes[0]);
         // The candidate below the threshold does not vote.
         assert_eq!(d.boxes[1], at(3.0, 0.0));
-        let off = PostProcessConfig { merge_radius: 0.0, ..post };
+        let off = PostProcessConfig { merge_radius: 0.0, ..post.clone() };
         assert_eq!(off.apply(vec![at(0.0, 0.0), at(0.2, 0.0)], vec![0.6, 0.3]).boxes[0], at(0.0, 0.0));
+    }
+
+    #[test]
+    fn voting_takes_the_mean_axis_and_keeps_the_kept_direction() {
+        let turned = |yaw: f64| Box3d { rot_z: yaw, ..at(0.0, 0.0) };
+        // Kept box at 3.0 rad; voters at 0.1 − π and 0.3 (the same axis as 0.3 − π ≈ −2.84).
+        let boxes = vec![turned(3.0), turned(0.1 - std::f64::consts::PI), turned(0.3)];
+        let scores = vec![0.5, 0.25, 0.25];
+        let post = PostProcessConfig { nms: NmsKind::Circle, circle_radius: 1.0, merge_radius: 0.5, ..Default::default() };
+        let got = post.apply(boxes.clone(), scores.clone()).boxes[0].rot_z;
+        // Axes (mod π): 3.0 − π = −0.1416, 0.1, 0.3; weighted mean of the doubled angles.
+        let (s, c) = [(3.0, 0.5), (0.1, 0.25), (0.3, 0.25)]
+            .iter()
+            .fold((0.0, 0.0), |(s, c), &(a, w): &(f64, f64)| (s + w * (2.0 * a).sin(), c + w * (2.0 * a).cos()));
+        let want = 0.5 * s.atan2(c) + std::f64::consts::PI;
+        assert!((got - want).abs() < 1e-6, "{got} vs {want}: the axis, on the kept box's side");
+        let own = PostProcessConfig { merge_heading: false, ..post };
+        assert_eq!(own.apply(boxes, scores).boxes[0].rot_z, 3.0);
     }
 }

@@ -5,13 +5,18 @@ mod common;
 
 use common::sim_batch;
 use model::{CenterPointConfig, Detector, PersonMinkUNetConfig};
-use sparse_conv::burn::tensor::{Device, DeviceKind};
+use sparse_conv::burn::tensor::Device;
+use sparse_conv::burn::tensor::wgpu::WgpuBackend;
 
 fn other_devices() -> Vec<(&'static str, Device)> {
     #[allow(deprecated)]
     let mut d = vec![("ndarray", Device::ndarray())];
     if std::env::var("PMUNET_TEST_WGPU").is_ok_and(|v| v == "1") {
-        d.push(("wgpu", Device::wgpu(DeviceKind::DefaultDevice)));
+        // Pinned to the platform's native API: `Device::wgpu` would settle on OpenGL where no
+        // Vulkan driver exists, and the op's kernels hang there.
+        let api = if cfg!(target_os = "macos") { WgpuBackend::Metal } else { WgpuBackend::Vulkan };
+        let device = Device::wgpu_options().graphics_api(api).init().unwrap_or_else(|e| panic!("PMUNET_TEST_WGPU=1 but no {api:?} adapter: {e}"));
+        d.push(("wgpu", device));
     } else {
         eprintln!("wgpu not checked: set PMUNET_TEST_WGPU=1 where a Vulkan adapter exists");
     }

@@ -7,7 +7,7 @@
 //! (temporary file + rename). Folders no pointer names are removed afterwards. So at every instant
 //! `latest` and `best` name complete checkpoints.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
 use burn::module::Module;
@@ -159,14 +159,5 @@ impl Checkpoints {
             }
         }
         Ok(())
-    }
-}
-
-/// The checkpoint folder of a run for `infer`: `best` if there is one, else `latest`.
-pub fn best_or_latest(checkpoints: &Path) -> Result<CheckpointFiles> {
-    let c = Checkpoints::new(checkpoints);
-    match c.get(Slot::Best)? {
-        Some(f) => Ok(f),
-        None => c.get(Slot::Latest)?.with_context(|| format!("{} holds no checkpoint", checkpoints.display())),
     }
 }

@@ -21,7 +21,7 @@ use model::{Detector, ModelConfig};
 use serde_json::json;
 
 use crate::backend::{BackendKind, init_threads};
-use crate::checkpoint::{CheckpointFiles, Checkpoints, Slot, best_or_latest};
+use crate::checkpoint::{CheckpointFiles, Checkpoints, Slot};
 use crate::data::{ensure_dataset, eval_loader};
 use crate::render::render_frames;
 use crate::run_dir::RunDir;
@@ -33,7 +33,8 @@ use crate::validate::{FrameResult, HeadingError, RANGE_BANDS, ap3d_by_range, det
 pub struct InferOptions {
     /// The split.
     pub split: Split,
-    /// `best` (default when a validation happened) or `latest`.
+    /// `latest` (default) or `best`, the one that scored highest on the validation frames (so its
+    /// AP on those frames is an optimistic estimate).
     pub checkpoint: Option<Slot>,
     /// Draw the first N frames.
     pub render: usize,
@@ -87,10 +88,8 @@ pub fn infer(run: &RunDir, opts: &InferOptions) -> Result<InferOutput> {
         cfg.backend = b;
     }
     init_threads(cfg.threads)?;
-    let files = match opts.checkpoint {
-        None => best_or_latest(&run.checkpoints())?,
-        Some(s) => Checkpoints::new(run.checkpoints()).get(s)?.with_context(|| format!("{} has no {s:?} checkpoint", run.root.display()))?,
-    };
+    let slot = opts.checkpoint.unwrap_or(Slot::Latest);
+    let files = Checkpoints::new(run.checkpoints()).get(slot)?.with_context(|| format!("{} has no {slot:?} checkpoint", run.root.display()))?;
     let device = cfg.backend.device();
     match &cfg.model {
         ModelConfig::PersonMinkunet(c) => infer_model(c.init(&device), &files, run, &cfg, opts, &device),

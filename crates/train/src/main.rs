@@ -82,7 +82,8 @@ enum Cmd {
         /// Split to run on.
         #[arg(long, value_enum, default_value = "val")]
         split: SplitArg,
-        /// Checkpoint (default: best if the run validated, else latest).
+        /// Checkpoint (default: latest; best was picked on the validation frames, so its AP on
+        /// them is optimistic).
         #[arg(long, value_enum)]
         checkpoint: Option<SlotArg>,
         /// Draw the first N frames as bird's-eye-view PNGs.

@@ -216,6 +216,21 @@ pub fn mean_std(xs: &[f64]) -> (f64, f64) {
     (m, s)
 }
 
+/// Half-width of the two-sided 95 % confidence interval of the mean of `n` values with sample
+/// standard deviation `std` (Student's t with n − 1 degrees of freedom); NaN below 2 values.
+pub fn ci95_half_width(n: usize, std: f64) -> f64 {
+    // t_{0.975, df} for df = 1..=30; beyond, the normal 1.96 is within 2 %.
+    const T: [f64; 30] = [
+        12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228, 2.201, 2.179, 2.160, 2.145, 2.131, 2.120, 2.110, 2.101, 2.093, 2.086,
+        2.080, 2.074, 2.069, 2.064, 2.060, 2.056, 2.052, 2.048, 2.045, 2.042,
+    ];
+    if n < 2 {
+        return f64::NAN;
+    }
+    let t = T.get(n - 2).copied().unwrap_or(1.96);
+    t * std / (n as f64).sqrt()
+}
+
 /// One variant's aggregate over its finished seeds.
 #[derive(Debug, Clone, PartialEq)]
 pub struct VariantResult {
@@ -229,6 +244,12 @@ pub struct VariantResult {
     pub planned: usize,
     /// AP3D at 0.3/0.5/0.7: (mean, std) over finished seeds.
     pub ap3d: [(f64, f64); 3],
+    /// Half-width of the 95 % interval of each AP3D mean (NaN below 2 seeds).
+    pub ap3d_ci95: [f64; 3],
+    /// AP3D@0.3 per range band (`validate::RANGE_BANDS`), mean over the seeds that report it.
+    pub ap3d_03_by_range: Option<[f64; 3]>,
+    /// Median heading error of matched boxes (degrees), mean over the seeds that report it.
+    pub heading_deg: Option<f64>,
     /// Training time, seconds: (mean, std).
     pub train_seconds: (f64, f64),
     /// Parameters.
@@ -257,7 +278,13 @@ pub fn aggregate(jobs: &[Job]) -> SweepResults {
         .map(|v| {
             let mine: Vec<&Job> = jobs.iter().filter(|j| j.variant == v).collect();
             let done: Vec<(TrainSummary, &Job)> = mine.iter().filter_map(|j| finished(&j.dir).map(|s| (s, *j))).collect();
-            let ap3d = [0, 1, 2].map(|i| mean_std(&done.iter().filter_map(|(s, _)| s.last_ap3d.map(|a| a[i])).collect::<Vec<_>>()));
+            let ap_values = |i: usize| done.iter().filter_map(|(s, _)| s.last_ap3d.map(|a| a[i])).collect::<Vec<_>>();
+            let ap3d = [0, 1, 2].map(|i| mean_std(&ap_values(i)));
+            let ap3d_ci95 = [0, 1, 2].map(|i| ci95_half_width(ap_values(i).len(), ap3d[i].1));
+            let bands: Vec<[[f64; 3]; 3]> = done.iter().filter_map(|(s, _)| s.last_ap3d_by_range).collect();
+            let ap3d_03_by_range = (!bands.is_empty()).then(|| [0, 1, 2].map(|b| mean_std(&bands.iter().map(|x| x[b][0]).collect::<Vec<_>>()).0));
+            let headings: Vec<f64> = done.iter().filter_map(|(s, _)| s.last_heading.map(|h| h.median_deg)).collect();
+            let heading_deg = (!headings.is_empty()).then(|| mean_std(&headings).0);
             let mut curves: BTreeMap<i64, Vec<f64>> = BTreeMap::new();
             for (_, j) in &done {
                 if let Ok(t) = Table::read(&RunDir::at(&j.dir).epochs_csv()) {
@@ -273,6 +300,9 @@ pub fn aggregate(jobs: &[Job]) -> SweepResults {
                 done: done.len(),
                 planned: mine.len(),
                 ap3d,
+                ap3d_ci95,
+                ap3d_03_by_range,
+                heading_deg,
                 train_seconds: mean_std(&done.iter().map(|(s, _)| s.train_seconds).collect::<Vec<_>>()),
                 params: done.first().map_or(0, |(s, _)| s.params),
                 curve: curves.into_iter().map(|(e, a)| (e as f64, mean_std(&a).0)).collect(),
@@ -287,27 +317,43 @@ impl SweepResults {
     pub fn to_csv(&self) -> Result<String> {
         let mut w = csv::Writer::from_writer(Vec::new());
         w.write_record([
-            "variant", "model", "seeds_done", "seeds", "ap3d_0.3_mean", "ap3d_0.3_std", "ap3d_0.5_mean", "ap3d_0.5_std", "ap3d_0.7_mean", "ap3d_0.7_std", "train_seconds_mean",
-            "train_seconds_std", "params",
+            "variant", "model", "seeds_done", "seeds", "ap3d_0.3_mean", "ap3d_0.3_std", "ap3d_0.3_ci95", "ap3d_0.5_mean", "ap3d_0.5_std", "ap3d_0.5_ci95", "ap3d_0.7_mean",
+            "ap3d_0.7_std", "ap3d_0.7_ci95", "ap3d_0.3_0-10m", "ap3d_0.3_10-20m", "ap3d_0.3_20-25m", "heading_error_deg", "train_seconds_mean", "train_seconds_std", "params",
         ])?;
+        let opt = |x: Option<f64>| x.map_or_else(String::new, |v| format!("{v}"));
         for v in &self.variants {
             let mut row = vec![v.variant.clone(), v.model.clone(), v.done.to_string(), v.planned.to_string()];
-            for (m, s) in v.ap3d {
-                row.extend([format!("{m}"), format!("{s}")]);
+            for ((m, s), ci) in v.ap3d.into_iter().zip(v.ap3d_ci95) {
+                row.extend([format!("{m}"), format!("{s}"), format!("{ci}")]);
             }
+            row.extend((0..3).map(|b| opt(v.ap3d_03_by_range.map(|r| r[b]))));
+            row.push(opt(v.heading_deg));
             row.extend([format!("{}", v.train_seconds.0), format!("{}", v.train_seconds.1), v.params.to_string()]);
             w.write_record(&row)?;
         }
         Ok(String::from_utf8(w.into_inner().map_err(|e| anyhow::anyhow!("{e}"))?)?)
     }
 
-    /// The Markdown table (AP in %, mean ± std over seeds).
+    /// The Markdown table (AP in %, mean ± std over seeds, the 95 % interval of the mean in
+    /// brackets where there are at least 2 seeds; range bands and heading error where reported).
     pub fn to_markdown(&self) -> String {
-        let mut s = String::from("| variant | model | seeds | AP3D@0.3 (%) | AP3D@0.5 (%) | AP3D@0.7 (%) | train time | params |\n|---|---|---|---|---|---|---|---|\n");
+        let mut s = String::from(
+            "| variant | model | seeds | AP3D@0.3 (%) | AP3D@0.5 (%) | AP3D@0.7 (%) | AP3D@0.3 by range 0–10 / 10–20 / 20–25 m (%) | heading error | train time | params |\n|---|---|---|---|---|---|---|---|---|---|\n",
+        );
         for v in &self.variants {
-            let ap = |i: usize| if v.done == 0 { "–".to_string() } else { format!("{:.1} ± {:.1}", 100.0 * v.ap3d[i].0, 100.0 * v.ap3d[i].1) };
+            let ap = |i: usize| {
+                if v.done == 0 {
+                    return "–".to_string();
+                }
+                let (m, sd) = v.ap3d[i];
+                let ci = v.ap3d_ci95[i];
+                let interval = if ci.is_finite() { format!(" [{:.1}, {:.1}]", 100.0 * (m - ci), 100.0 * (m + ci)) } else { String::new() };
+                format!("{:.1} ± {:.1}{interval}", 100.0 * m, 100.0 * sd)
+            };
+            let bands = v.ap3d_03_by_range.map_or_else(|| "–".to_string(), |r| format!("{:.1} / {:.1} / {:.1}", 100.0 * r[0], 100.0 * r[1], 100.0 * r[2]));
+            let heading = v.heading_deg.map_or_else(|| "–".to_string(), |h| format!("{h:.0}°"));
             let t = if v.done == 0 { "–".to_string() } else { format!("{:.0} ± {:.0} s", v.train_seconds.0, v.train_seconds.1) };
-            s.push_str(&format!("| {} | {} | {}/{} | {} | {} | {} | {} | {} |\n", v.variant, v.model, v.done, v.planned, ap(0), ap(1), ap(2), t, v.params));
+            s.push_str(&format!("| {} | {} | {}/{} | {} | {} | {} | {bands} | {heading} | {} | {} |\n", v.variant, v.model, v.done, v.planned, ap(0), ap(1), ap(2), t, v.params));
         }
         s
     }
@@ -335,6 +381,14 @@ mod tests {
         assert!((m - 2.0).abs() < 1e-12 && (s - 1.0).abs() < 1e-12);
         assert_eq!(mean_std(&[0.5]), (0.5, 0.0));
         assert!(mean_std(&[]).0.is_nan());
+    }
+
+    #[test]
+    fn ci95_uses_students_t() {
+        // n = 3, std 1: t_{0.975, 2} = 4.303, / √3.
+        assert!((ci95_half_width(3, 1.0) - 4.303 / 3f64.sqrt()).abs() < 1e-12);
+        assert!(ci95_half_width(1, 1.0).is_nan());
+        assert!((ci95_half_width(100, 2.0) - 1.96 * 0.2).abs() < 1e-12);
     }
 
     #[test]

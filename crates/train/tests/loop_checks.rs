@@ -159,7 +159,7 @@ fn sweep_skips_finished_runs_and_aggregates_seeds() {
     assert_eq!(b.curve.len(), 2);
     assert!((b.curve[0].1 - 0.4).abs() < 1e-12 && (b.curve[1].1 - 0.8).abs() < 1e-12, "{:?}", b.curve);
     let md = std::fs::read_to_string(sweep.dir().join("results.md")).unwrap();
-    assert!(md.contains("| a | person_minkunet | 2/2 | 50.0 ± 14.1 |"), "{md}");
+    assert!(md.contains("| a | person_minkunet | 2/2 | 50.0 ± 14.1 [-77.1, 177.1] |"), "{md}");
     assert!(sweep.dir().join("results.csv").exists() && sweep.dir().join("curves.png").exists());
     // A re-run has nothing left to do.
     let again = run_sweep(&sweep, &jobs, |_| panic!("every run is finished"), false).unwrap();

@@ -1,7 +1,7 @@
 //! Times an inference forward pass and one training step (forward, loss, backward, Adam) of either
 //! detector on a voxel scene, and reports the peak memory.
 //!
-//! `cargo run -p model --bin model-bench -- --model person_minkunet --coords ../shared/bench/scene_jrdb_like.npy --threads 2`
+//! `cargo run -p model --bin model-bench -- --model person_minkunet --coords bench/scene_jrdb_like.npy --threads 2`
 
 use std::path::PathBuf;
 

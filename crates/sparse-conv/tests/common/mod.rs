@@ -3,13 +3,15 @@
 #![allow(dead_code)]
 
 use std::collections::{BTreeMap, HashSet};
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock, mpsc};
+use std::time::Duration;
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use sparse_conv::{Coord, CoordIndex, KernelMap, sparse_conv};
 use sparse_conv::burn::tensor::module::{conv_transpose3d, conv3d};
 use sparse_conv::burn::tensor::ops::{ConvOptions, ConvTransposeOptions};
+use sparse_conv::burn::tensor::wgpu::WgpuBackend;
 use sparse_conv::burn::tensor::{DType, Device, Tensor, TensorData};
 
 pub fn rng(seed: u64) -> ChaCha8Rng {
@@ -161,29 +163,87 @@ pub fn assert_maps_close(actual: &BTreeMap<Coord, Vec<f64>>, expected: &BTreeMap
     }
 }
 
-/// The wgpu device when an adapter runs the op; `None` (the test then skips, saying so) unless
-/// `PMUNET_REQUIRE_WGPU=1`, which CI sets after installing the software Vulkan driver.
+/// How long the wgpu probe may take (device bring-up and one tiny convolution), and how long a
+/// test binary may run once it has a wgpu device, before it fails instead of waiting for ever.
+const PROBE_LIMIT: Duration = Duration::from_secs(120);
+const BINARY_LIMIT: Duration = Duration::from_secs(25 * 60);
+
+/// The graphics APIs the op's CubeCL kernels are tested on. OpenGL is left out: on Mesa's GL
+/// (llvmpipe through EGL) the kernels wait on a futex for ever, and `Device::wgpu`'s automatic
+/// choice picks GL on a machine without a Vulkan driver.
+fn native_apis() -> Vec<WgpuBackend> {
+    if cfg!(target_os = "macos") {
+        vec![WgpuBackend::Metal]
+    } else if cfg!(target_os = "windows") {
+        vec![WgpuBackend::Dx12, WgpuBackend::Vulkan]
+    } else {
+        vec![WgpuBackend::Vulkan]
+    }
+}
+
+/// The wgpu device, once per test binary, when an adapter on a native API runs the op correctly
+/// within [`PROBE_LIMIT`]; `None` otherwise (the test then skips, saying why), unless
+/// `PMUNET_REQUIRE_WGPU=1`, which CI sets after installing the software Vulkan driver: then a
+/// missing or failing adapter is a test failure. With a device, a watchdog ends the binary
+/// with a message if it runs past [`BINARY_LIMIT`].
 pub fn wgpu_device() -> Option<Device> {
-    use sparse_conv::burn::tensor::DeviceKind;
+    static DEVICE: OnceLock<Option<Device>> = OnceLock::new();
+    DEVICE.get_or_init(probe_wgpu).clone()
+}
+
+fn probe_wgpu() -> Option<Device> {
     let required = std::env::var("PMUNET_REQUIRE_WGPU").is_ok_and(|v| v == "1");
-    let probe = std::panic::catch_unwind(|| {
-        let device = Device::wgpu(DeviceKind::DefaultDevice);
-        let coords = vec![[0, 0, 0, 0], [0, 1, 0, 0]];
-        let index = sparse_conv::CoordIndex::build(&coords).unwrap();
-        let map = std::sync::Arc::new(sparse_conv::KernelMap::submanifold(&coords, &index, 3, 1));
-        let x = Tensor::<2>::ones([2, 1], &device);
-        let w = Tensor::<3>::ones([27, 1, 1], &device);
-        let out = values(sparse_conv::sparse_conv(x, w, &map));
-        assert_eq!(out, vec![2.0, 2.0]);
-        device
-    });
-    match probe {
-        Ok(device) => Some(device),
-        Err(_) if required => panic!("PMUNET_REQUIRE_WGPU=1 but the sparse conv could not run on a wgpu adapter"),
-        Err(_) => {
-            eprintln!("skipping wgpu: no usable adapter (set PMUNET_REQUIRE_WGPU=1 to make this an error)");
-            None
+    let skip = |why: String| -> Option<Device> {
+        if required {
+            panic!("PMUNET_REQUIRE_WGPU=1 but {why}");
         }
+        eprintln!("skipping wgpu: {why} (set PMUNET_REQUIRE_WGPU=1 to make this an error)");
+        None
+    };
+    let (tx, rx) = mpsc::channel();
+    // The probe runs on its own thread: a driver that never answers leaves it blocked, not us.
+    std::thread::spawn(move || {
+        let mut failures = Vec::new();
+        for api in native_apis() {
+            let attempt = std::panic::catch_unwind(|| -> Result<Device, String> {
+                let device = Device::wgpu_options().graphics_api(api).init().map_err(|e| e.to_string())?;
+                let coords = vec![[0, 0, 0, 0], [0, 1, 0, 0]];
+                let index = sparse_conv::CoordIndex::build(&coords).unwrap();
+                let map = Arc::new(sparse_conv::KernelMap::submanifold(&coords, &index, 3, 1));
+                let x = Tensor::<2>::ones([2, 1], &device);
+                let w = Tensor::<3>::ones([27, 1, 1], &device);
+                let out = values(sparse_conv(x, w, &map));
+                if out != vec![2.0, 2.0] {
+                    return Err(format!("a 2-voxel convolution gave {out:?} instead of [2.0, 2.0]"));
+                }
+                Ok(device)
+            });
+            match attempt {
+                Ok(Ok(device)) => {
+                    let _ = tx.send(Ok(device));
+                    return;
+                }
+                Ok(Err(e)) => failures.push(format!("{api:?}: {e}")),
+                Err(_) => failures.push(format!("{api:?}: panicked")),
+            }
+        }
+        let _ = tx.send(Err(failures.join("; ")));
+    });
+    match rx.recv_timeout(PROBE_LIMIT) {
+        Ok(Ok(device)) => {
+            std::thread::spawn(|| {
+                std::thread::sleep(BINARY_LIMIT);
+                eprintln!(
+                    "error: this test binary has run {} minutes with a wgpu device: a driver that stopped answering? \
+                     (the wgpu tests finish in a few minutes on lavapipe)",
+                    BINARY_LIMIT.as_secs() / 60
+                );
+                std::process::exit(101);
+            });
+            Some(device)
+        }
+        Ok(Err(why)) => skip(format!("no adapter on {:?} runs the sparse conv ({why})", native_apis())),
+        Err(_) => skip(format!("the wgpu probe did not finish within {} s", PROBE_LIMIT.as_secs())),
     }
 }
 
