@@ -1,5 +1,5 @@
 //! Greedy non-maximum suppression: the distance-based BEV NMS Person-MinkUNet uses (spec §1.12)
-//! and rotated BEV-IoU NMS.
+//! and rotated BEV-IoU NMS, and the box voting that may follow either.
 //!
 //! Both walk the candidates by descending score (ties keep input order), drop scores not above
 //! `score_threshold` (and NaN), and keep a candidate unless a box *already kept* suppresses it,
@@ -84,21 +84,87 @@ impl Grid {
         let k = self.key(b);
         self.cells.entry(k).or_default().push(i);
     }
-    fn any_near(&self, b: &Box3d, mut hit: impl FnMut(usize) -> bool) -> bool {
+    /// The entries of the 3×3 cells around `b`'s cell: every entry within one cell of it.
+    fn near(&self, b: &Box3d) -> impl Iterator<Item = usize> + '_ {
         let (kx, ky) = self.key(b);
-        for dx in -1..=1 {
-            for dy in -1..=1 {
-                if self
-                    .cells
-                    .get(&(kx + dx, ky + dy))
-                    .is_some_and(|v| v.iter().any(|&i| hit(i)))
-                {
-                    return true;
-                }
+        (-1..=1)
+            .flat_map(move |dx| (-1..=1).map(move |dy| (kx + dx, ky + dy)))
+            .filter_map(|k| self.cells.get(&k))
+            .flatten()
+            .copied()
+    }
+    fn any_near(&self, b: &Box3d, hit: impl FnMut(usize) -> bool) -> bool {
+        self.near(b).any(hit)
+    }
+}
+
+/// Box voting after NMS: every candidate above `score_threshold` votes, with its score as
+/// weight, for the kept box (`kept`, indices into `boxes`) whose centre is nearest in BEV if that
+/// lies within `radius`; a kept box becomes the weighted mean of its voters' centres and sizes
+/// (it votes for itself, so it always has one). With `axis`, its heading becomes the weighted
+/// mean axis of the voters' headings (the mean of `(cos 2θ, sin 2θ)`: votes π apart agree),
+/// turned to the side of its own heading; without, it keeps its own.
+pub fn vote<S: Copy + Into<f64>>(
+    boxes: &[Box3d],
+    scores: &[S],
+    kept: &[usize],
+    radius: f64,
+    score_threshold: f64,
+    axis: bool,
+) -> Vec<Box3d> {
+    let mut grid = Grid::new(radius);
+    for (slot, &i) in kept.iter().enumerate() {
+        grid.insert(&boxes[i], slot);
+    }
+    // Weighted sums of cx, cy, cz, l, w, h, the weight, cos 2θ and sin 2θ, per kept box.
+    let mut sums = vec![[0.0f64; 9]; kept.len()];
+    for (b, &s) in boxes.iter().zip(scores) {
+        let s: f64 = s.into();
+        if s.is_nan() || s <= score_threshold {
+            continue;
+        }
+        let nearest = grid
+            .near(b)
+            .map(|slot| {
+                let k = &boxes[kept[slot]];
+                ((k.cx - b.cx).hypot(k.cy - b.cy), slot)
+            })
+            .filter(|&(d, _)| d <= radius)
+            .min_by(|x, y| x.0.total_cmp(&y.0));
+        if let Some((_, slot)) = nearest {
+            let (s2, c2) = (2.0 * b.rot_z).sin_cos();
+            for (a, v) in sums[slot]
+                .iter_mut()
+                .zip([b.cx, b.cy, b.cz, b.l, b.w, b.h, 1.0, c2, s2])
+            {
+                *a += s * v;
             }
         }
-        false
     }
+    kept.iter()
+        .zip(&sums)
+        .map(|(&i, acc)| {
+            let m = |k: usize| acc[k] / acc[6];
+            let own = boxes[i].rot_z;
+            let rot_z = if axis && acc[7].hypot(acc[8]) > 1e-9 {
+                let phi = 0.5 * acc[8].atan2(acc[7]);
+                // φ or φ + π, whichever is nearer the kept box's heading, in the same turn as it.
+                let half = std::f64::consts::FRAC_PI_2;
+                own + ((phi - own + half).rem_euclid(std::f64::consts::PI) - half)
+            } else {
+                own
+            };
+            Box3d {
+                cx: m(0),
+                cy: m(1),
+                cz: m(2),
+                l: m(3),
+                w: m(4),
+                h: m(5),
+                rot_z,
+            }
+        })
+        .collect()
 }
 
 /// Whether kept box `a` suppresses `b` under the distance criterion of spec §1.12.

@@ -1,10 +1,8 @@
 //! Post-processing shared by both detectors: score threshold, candidate cap, NMS, box voting,
 //! output cap.
 
-use std::collections::HashMap;
-
 use data_jrdb::Box3d;
-use eval::nms::{NmsConfig, nms_bev_iou, nms_distance};
+use eval::nms::{NmsConfig, nms_bev_iou, nms_distance, vote};
 
 use crate::config::{NmsKind, PostProcessConfig};
 use crate::detector::Detections;
@@ -53,65 +51,6 @@ fn best_k(boxes: Vec<Box3d>, scores: Vec<f32>, k: usize) -> (Vec<Box3d>, Vec<f32
     idx.truncate(k);
     idx.sort_unstable();
     (idx.iter().map(|&i| boxes[i]).collect(), idx.iter().map(|&i| scores[i]).collect())
-}
-
-/// Box voting: every candidate above `threshold` votes, with its score as weight, for the kept
-/// box whose centre is nearest in BEV if that lies within `radius`; a kept box becomes the
-/// weighted mean of its voters' centres and sizes (it votes for itself, so it always has one).
-/// With `axis`, the heading becomes the weighted mean axis of the voters' headings (the mean of
-/// `(cos 2θ, sin 2θ)`: votes π apart agree), turned to the side of the kept box's own heading;
-/// without, it stays the kept box's.
-pub fn vote(boxes: &[Box3d], scores: &[f32], kept: &[usize], radius: f64, threshold: f64, axis: bool) -> Vec<Box3d> {
-    let key = |b: &Box3d| ((b.cx / radius).floor() as i64, (b.cy / radius).floor() as i64);
-    let mut grid: HashMap<(i64, i64), Vec<usize>> = HashMap::new();
-    for (slot, &i) in kept.iter().enumerate() {
-        grid.entry(key(&boxes[i])).or_default().push(slot);
-    }
-    // Weighted sums of cx, cy, cz, l, w, h, the weight, cos 2θ and sin 2θ, per kept box.
-    let mut sums = vec![[0.0f64; 9]; kept.len()];
-    for (i, b) in boxes.iter().enumerate() {
-        let s = scores[i] as f64;
-        if s.is_nan() || s <= threshold {
-            continue;
-        }
-        let (kx, ky) = key(b);
-        let mut best: Option<(f64, usize)> = None;
-        for dx in -1..=1 {
-            for dy in -1..=1 {
-                for &slot in grid.get(&(kx + dx, ky + dy)).into_iter().flatten() {
-                    let k = &boxes[kept[slot]];
-                    let d = (k.cx - b.cx).hypot(k.cy - b.cy);
-                    if d <= radius && best.is_none_or(|(bd, _)| d < bd) {
-                        best = Some((d, slot));
-                    }
-                }
-            }
-        }
-        if let Some((_, slot)) = best {
-            let acc = &mut sums[slot];
-            let (s2, c2) = (2.0 * b.rot_z).sin_cos();
-            for (a, v) in acc.iter_mut().zip([b.cx, b.cy, b.cz, b.l, b.w, b.h, 1.0, c2, s2]) {
-                *a += s * v;
-            }
-        }
-    }
-    kept.iter()
-        .zip(&sums)
-        .map(|(&i, acc)| {
-            let w = acc[6];
-            let m = |k: usize| acc[k] / w;
-            let own = boxes[i].rot_z;
-            let rot_z = if axis && acc[7].hypot(acc[8]) > 1e-9 {
-                let phi = 0.5 * acc[8].atan2(acc[7]);
-                // φ or φ + π, whichever is nearer the kept box's heading, in the same turn as it.
-                let d = (phi - own + std::f64::consts::FRAC_PI_2).rem_euclid(std::f64::consts::PI) - std::f64::consts::FRAC_PI_2;
-                own + d
-            } else {
-                own
-            };
-            Box3d { cx: m(0), cy: m(1), cz: m(2), l: m(3), w: m(4), h: m(5), rot_z, ..boxes[i] }
-        })
-        .collect()
 }
 
 /// CenterPoint's circle NMS: greedy by descending score (ties in input order), a candidate is

@@ -155,7 +155,7 @@ impl Default for AugmentSection {
 /// `preset = "bench-v1"` names the simulated benchmark (`data_jrdb::sim::Preset`); keys written
 /// beside it override the preset's values, keys left out take the preset's (or, without a
 /// preset, the plain defaults below).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SimulateConfig {
     /// A named benchmark the other keys start from.
@@ -181,12 +181,6 @@ pub struct SimulateConfig {
     /// Sequence names: `jrdb` (JRDB's, its default split) or `benchmark` (`sim-val-*` for validation).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub naming: Option<data_jrdb::sim::Naming>,
-}
-
-impl Default for SimulateConfig {
-    fn default() -> Self {
-        Self { preset: None, sequences: None, frames: None, seed: 0, max_people: None, label_range: None, frame_step: None, naming: None }
-    }
 }
 
 impl SimulateConfig {

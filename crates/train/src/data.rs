@@ -32,7 +32,7 @@ pub fn ensure_dataset(cfg: &DataConfig) -> Result<Option<SynthSummary>> {
     let synth_cfg = sim.synth();
     eprintln!(
         "generating the simulated dataset{} ({} sequences × {} frames, seed {}) at {}",
-        sim.preset.map_or_else(String::new, |p| format!(" {}", serde_json::to_value(p).map(|v| v.as_str().unwrap_or("").to_string()).unwrap_or_default())),
+        sim.preset.map_or_else(String::new, |p| format!(" {}", p.name())),
         synth_cfg.sequences,
         synth_cfg.frames,
         synth_cfg.seed,

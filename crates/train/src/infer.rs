@@ -26,7 +26,7 @@ use crate::data::{ensure_dataset, eval_loader};
 use crate::render::render_frames;
 use crate::run_dir::RunDir;
 use crate::config::RunConfig;
-use crate::validate::{FrameResult, HeadingError, RANGE_BANDS, ap3d_by_range, detect_split, format_by_range, score};
+use crate::validate::{FrameResult, HeadingError, RANGE_BANDS, ap3d_by_range, detect_split, format_by_range, to_eval_frames};
 
 /// What to infer.
 #[derive(Debug, Clone)]
@@ -104,8 +104,7 @@ fn infer_model<D: Detector>(model: D, files: &CheckpointFiles, run: &RunDir, cfg
     let frames = detect_split(&model, &loader, device, opts.verbose)?;
     let dir = opts.out.clone().unwrap_or_else(|| run.detections(split_name(opts.split)));
     let protocol = cfg.eval.protocol();
-    let report = write_results(&frames, &dir, &protocol)?;
-    let by_range = ap3d_by_range(&frames, &protocol);
+    let (report, by_range) = write_results(&frames, &dir, &protocol)?;
     let heading = HeadingError::of(&frames, &protocol);
     let mut eval_json = report.to_json();
     if let Some(obj) = eval_json.as_object_mut() {
@@ -132,8 +131,9 @@ fn infer_model<D: Detector>(model: D, files: &CheckpointFiles, run: &RunDir, cfg
 }
 
 /// Writes frame results as pmunet JSON (`json/`), official detection txt (`kitti/`) and GT txt
-/// (`kitti_gt/`) under `dir`, plus PR CSV and PNG, and returns the report.
-pub fn write_results(frames: &[FrameResult], dir: &std::path::Path, protocol: &eval::Protocol) -> Result<eval::Report> {
+/// (`kitti_gt/`) under `dir`, plus PR CSV and PNG, and returns the report and the AP3D by range
+/// band.
+pub fn write_results(frames: &[FrameResult], dir: &std::path::Path, protocol: &eval::Protocol) -> Result<(eval::Report, [[f64; 3]; 3])> {
     let mut by_seq: BTreeMap<&str, DetectionFile> = BTreeMap::new();
     for f in frames {
         let file = by_seq.entry(&f.sequence).or_insert_with(|| DetectionFile { sequence: Some(f.sequence.clone()), detections: BTreeMap::new() });
@@ -142,12 +142,12 @@ pub fn write_results(frames: &[FrameResult], dir: &std::path::Path, protocol: &e
     for (seq, file) in &by_seq {
         write_detections(&dir.join("json").join(format!("{seq}.json")), file)?;
     }
-    let eval_frames: Vec<eval::Frame> = frames.iter().map(FrameResult::to_eval_frame).collect();
+    let eval_frames = to_eval_frames(frames);
     eval::dataset::write_kitti_tree(&dir.join("kitti"), &eval_frames, FileKind::Detections)?;
     eval::dataset::write_kitti_tree(&dir.join("kitti_gt"), &eval_frames, FileKind::GroundTruth)?;
-    let report = score(frames, protocol);
+    let report = eval::Report::compute(&eval_frames, protocol);
     report.write_pr_csv(&dir.join("pr.csv"))?;
     crate::plots::register_fonts();
     eval::plot::plot_pr(&report, &dir.join("pr.png"))?;
-    Ok(report)
+    Ok((report, ap3d_by_range(&eval_frames, protocol)))
 }

@@ -278,9 +278,9 @@ pub fn aggregate(jobs: &[Job]) -> SweepResults {
         .map(|v| {
             let mine: Vec<&Job> = jobs.iter().filter(|j| j.variant == v).collect();
             let done: Vec<(TrainSummary, &Job)> = mine.iter().filter_map(|j| finished(&j.dir).map(|s| (s, *j))).collect();
-            let ap_values = |i: usize| done.iter().filter_map(|(s, _)| s.last_ap3d.map(|a| a[i])).collect::<Vec<_>>();
-            let ap3d = [0, 1, 2].map(|i| mean_std(&ap_values(i)));
-            let ap3d_ci95 = [0, 1, 2].map(|i| ci95_half_width(ap_values(i).len(), ap3d[i].1));
+            let ap_values = [0, 1, 2].map(|i| done.iter().filter_map(|(s, _)| s.last_ap3d.map(|a| a[i])).collect::<Vec<_>>());
+            let ap3d = ap_values.each_ref().map(|v| mean_std(v));
+            let ap3d_ci95 = [0, 1, 2].map(|i| ci95_half_width(ap_values[i].len(), ap3d[i].1));
             let bands: Vec<[[f64; 3]; 3]> = done.iter().filter_map(|(s, _)| s.last_ap3d_by_range).collect();
             let ap3d_03_by_range = (!bands.is_empty()).then(|| [0, 1, 2].map(|b| mean_std(&bands.iter().map(|x| x[b][0]).collect::<Vec<_>>()).0));
             let headings: Vec<f64> = done.iter().filter_map(|(s, _)| s.last_heading.map(|h| h.median_deg)).collect();

@@ -5,7 +5,7 @@ use std::time::Instant;
 
 use anyhow::Result;
 use burn::tensor::Device;
-use data_jrdb::{Box3d, Loader};
+use data_jrdb::{Box3d, Loader, stats};
 use eval::jrdb::{Detection, detections_to_kitti};
 use eval::kitti::KittiObject;
 use eval::{Frame, Protocol, Report};
@@ -96,13 +96,8 @@ impl HeadingError {
         if errors.is_empty() {
             return None;
         }
-        let median = |mut v: Vec<f64>| {
-            v.sort_by(f64::total_cmp);
-            let n = v.len();
-            if n % 2 == 1 { v[n / 2] } else { 0.5 * (v[n / 2 - 1] + v[n / 2]) }
-        };
         let axis: Vec<f64> = errors.iter().map(|e| e.min(std::f64::consts::PI - e)).collect();
-        Some(HeadingError { matched: errors.len(), median_deg: median(errors).to_degrees(), median_axis_deg: median(axis).to_degrees() })
+        Some(HeadingError { matched: errors.len(), median_deg: stats::median(errors).to_degrees(), median_axis_deg: stats::median(axis).to_degrees() })
     }
 }
 
@@ -149,18 +144,21 @@ pub fn detect_split<D: Detector>(model: &D, loader: &Loader, device: &Device, sh
     Ok(out)
 }
 
+/// The evaluator's frames of `frames`.
+pub fn to_eval_frames(frames: &[FrameResult]) -> Vec<Frame> {
+    frames.iter().map(FrameResult::to_eval_frame).collect()
+}
+
 /// Scores frame results under `protocol`.
 pub fn score(frames: &[FrameResult], protocol: &Protocol) -> Report {
-    let eval_frames: Vec<Frame> = frames.iter().map(FrameResult::to_eval_frame).collect();
-    Report::compute(&eval_frames, protocol)
+    Report::compute(&to_eval_frames(frames), protocol)
 }
 
 /// AP3D at IoU 0.3, 0.5, 0.7 in each of [`RANGE_BANDS`], `protocol` otherwise.
-pub fn ap3d_by_range(frames: &[FrameResult], protocol: &Protocol) -> [[f64; 3]; 3] {
-    let eval_frames: Vec<Frame> = frames.iter().map(FrameResult::to_eval_frame).collect();
+pub fn ap3d_by_range(eval_frames: &[Frame], protocol: &Protocol) -> [[f64; 3]; 3] {
     RANGE_BANDS.map(|(lo, hi)| {
         let band = Protocol { min_range: (lo > 0.0).then_some(lo), max_range: Some(hi), ..*protocol };
-        eval::ap::IOU_THRESHOLDS.map(|t| eval::ap::evaluate(&eval_frames, t, eval::ap::Overlap::Box3d, &band).ap)
+        eval::ap::IOU_THRESHOLDS.map(|t| eval::ap::evaluate(eval_frames, t, eval::ap::Overlap::Box3d, &band).ap)
     })
 }
 
@@ -178,9 +176,10 @@ pub fn format_by_range(by_range: &[[f64; 3]; 3]) -> String {
 pub fn validate<D: Detector>(model: &D, loader: &Loader, device: &Device, protocol: &Protocol, show_progress: bool) -> Result<Validation> {
     let t0 = Instant::now();
     let frames = detect_split(model, loader, device, show_progress)?;
-    let report = score(&frames, protocol);
+    let eval_frames = to_eval_frames(&frames);
+    let report = Report::compute(&eval_frames, protocol);
     let ap3d = [report.ap3d[0].ap, report.ap3d[1].ap, report.ap3d[2].ap];
-    let ap3d_by_range = ap3d_by_range(&frames, protocol);
+    let ap3d_by_range = ap3d_by_range(&eval_frames, protocol);
     let heading = HeadingError::of(&frames, protocol);
     Ok(Validation { ap3d, ap3d_by_range, heading, report, frames, seconds: t0.elapsed().as_secs_f64() })
 }

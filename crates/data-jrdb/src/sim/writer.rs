@@ -65,6 +65,13 @@ pub enum Preset {
 }
 
 impl Preset {
+    /// The name configs and the CLI use (`bench-v1`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Preset::BenchV1 => "bench-v1",
+        }
+    }
+
     /// The preset's simulation with `seed`.
     pub fn synth(self, seed: u64) -> SynthConfig {
         match self {
@@ -145,14 +152,14 @@ fn mkdir(p: &Path) -> Result<()> {
 
 /// Writes a simulated JRDB-format tree under `out` (a plain root: `out/pointclouds/...`).
 pub fn synth(out: &Path, cfg: &SynthConfig) -> Result<SynthSummary> {
+    if cfg.frame_step == 0 {
+        return Err(DataError::key(out, "frame_step", "must be at least 1"));
+    }
     let layout = Layout { root: out.to_path_buf() };
     let calib = Calibration::default();
     mkdir(&out.join("calibration"))?;
     calib.write(&layout.calibration_file())?;
     mkdir(&out.join("labels").join("labels_3d"))?;
-    if cfg.frame_step == 0 {
-        return Err(DataError::new(out, crate::error::ErrorKind::Layout("frame_step must be at least 1".into())));
-    }
     let names = names_for(cfg.naming, cfg.sequences);
     let mut summary = SynthSummary { sequences: names.clone(), ..Default::default() };
     // Sequences one after another; the rays of each scan run in parallel.
