@@ -3,6 +3,8 @@
 
 mod common;
 
+use std::sync::OnceLock;
+
 use common::sim_batch;
 use model::{CenterPointConfig, Detector, PersonMinkUNetConfig};
 use sparse_conv::burn::tensor::Device;
@@ -12,15 +14,25 @@ fn other_devices() -> Vec<(&'static str, Device)> {
     #[allow(deprecated)]
     let mut d = vec![("ndarray", Device::ndarray())];
     if std::env::var("PMUNET_TEST_WGPU").is_ok_and(|v| v == "1") {
-        // Pinned to the platform's native API: `Device::wgpu` would settle on OpenGL where no
-        // Vulkan driver exists, and the op's kernels hang there.
-        let api = if cfg!(target_os = "macos") { WgpuBackend::Metal } else { WgpuBackend::Vulkan };
-        let device = Device::wgpu_options().graphics_api(api).init().unwrap_or_else(|e| panic!("PMUNET_TEST_WGPU=1 but no {api:?} adapter: {e}"));
-        d.push(("wgpu", device));
+        d.push(("wgpu", wgpu_device()));
     } else {
         eprintln!("wgpu not checked: set PMUNET_TEST_WGPU=1 where a Vulkan adapter exists");
     }
     d
+}
+
+/// The wgpu device, initialised once per test binary: a second `init` on the same device fails
+/// ("Service already initialized"), and the tests run in parallel.
+fn wgpu_device() -> Device {
+    static DEVICE: OnceLock<Device> = OnceLock::new();
+    DEVICE
+        .get_or_init(|| {
+            // Pinned to the platform's native API: `Device::wgpu` would settle on OpenGL where no
+            // Vulkan driver exists, and the op's kernels hang there.
+            let api = if cfg!(target_os = "macos") { WgpuBackend::Metal } else { WgpuBackend::Vulkan };
+            Device::wgpu_options().graphics_api(api).init().unwrap_or_else(|e| panic!("PMUNET_TEST_WGPU=1 but no {api:?} adapter: {e}"))
+        })
+        .clone()
 }
 
 fn assert_close(a: &[f32], b: &[f32], what: &str) {
