@@ -1,10 +1,11 @@
-//! `timestamps/<seq>/frames_pc.json`: when each frame's two clouds were taken.
+//! `timestamps/<seq>/frames_pc.json`: when each frame's two clouds were taken (the simulator
+//! writes it for a complete tree; detection does not need it).
 
 use std::path::Path;
 
 use serde_json::{Value, json};
 
-use crate::error::{DataError, ErrorKind, Result};
+use crate::error::{DataError, Result};
 
 /// One entry of `frames_pc.json`.
 #[derive(Debug, Clone, PartialEq)]
@@ -13,21 +14,6 @@ pub struct FrameTime {
     pub frame_id: u64,
     /// `timestamp` (seconds).
     pub timestamp: f64,
-}
-
-/// Reads `frames_pc.json`.
-pub fn read_timestamps(path: &Path) -> Result<Vec<FrameTime>> {
-    let text = std::fs::read_to_string(path).map_err(|e| DataError::io(path, e))?;
-    let doc: Value = serde_json::from_str(&text).map_err(|e| DataError::new(path, ErrorKind::Parse(e.to_string())))?;
-    let data = doc.get("data").and_then(Value::as_array).ok_or_else(|| DataError::key(path, "data", "missing or not a list"))?;
-    data.iter()
-        .enumerate()
-        .map(|(i, d)| {
-            let frame_id = d.get("frame_id").and_then(Value::as_u64).ok_or_else(|| DataError::key(path, format!("data[{i}].frame_id"), "missing or not an integer"))?;
-            let timestamp = d.get("timestamp").and_then(Value::as_f64).ok_or_else(|| DataError::key(path, format!("data[{i}].timestamp"), "missing or not a number"))?;
-            Ok(FrameTime { frame_id, timestamp })
-        })
-        .collect()
 }
 
 /// Writes `frames_pc.json` for frames `000000.pcd, ...` of `seq`.

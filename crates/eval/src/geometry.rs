@@ -25,14 +25,6 @@ fn twice_signed_area(p: &[Point]) -> f64 {
         .sum()
 }
 
-/// Absolute area of a simple polygon (either orientation).
-pub fn polygon_area(p: &[Point]) -> f64 {
-    if p.len() < 3 {
-        return 0.0;
-    }
-    (twice_signed_area(p) / 2.0).abs()
-}
-
 /// Area of the intersection of two convex polygons given in either orientation.
 ///
 /// Sutherland–Hodgman: the subject is clipped by each edge of the clip polygon in turn.

@@ -4,7 +4,8 @@
 //!
 //! Crate map:
 //! - [`geometry`]: exact convex clipping, [`bev_iou`], [`iou_3d`] of [`Box3d`].
-//! - [`nms`]: Person-MinkUNet's distance NMS ([`nms_distance`]) and rotated-IoU NMS ([`nms_bev_iou`]).
+//! - [`nms`]: Person-MinkUNet's distance NMS ([`nms_distance`]), circle NMS ([`nms_circle`]),
+//!   rotated-IoU NMS ([`nms_bev_iou`]) and box voting ([`nms::vote`]).
 //! - [`kitti`]: the official 17-column txt format and the official JRDB → KITTI conversion.
 //! - [`jrdb`]: JRDB `labels_3d` JSON (ground truth) and pmunet's detection JSON (schema documented there).
 //! - [`dataset`]: pairing GT and detection files into [`Frame`]s, writing the official txt tree.
@@ -43,7 +44,7 @@ pub mod geometry;
 pub mod jrdb;
 /// The official KITTI-style txt format.
 pub mod kitti;
-/// Distance and IoU non-maximum suppression.
+/// Non-maximum suppression and box voting.
 pub mod nms;
 /// PR curve PNG.
 pub mod plot;
@@ -54,5 +55,5 @@ pub use ap::{Curve, Frame, Interpolation, Overlap, Protocol, evaluate};
 pub use data_jrdb::Box3d;
 pub use error::{EvalError, Result};
 pub use geometry::{bev_iou, iou_3d};
-pub use nms::{NmsConfig, nms_bev_iou, nms_distance};
+pub use nms::{NmsConfig, nms_bev_iou, nms_circle, nms_distance};
 pub use report::Report;

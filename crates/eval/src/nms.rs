@@ -1,7 +1,7 @@
-//! Greedy non-maximum suppression: the distance-based BEV NMS Person-MinkUNet uses (spec §1.12)
-//! and rotated BEV-IoU NMS, and the box voting that may follow either.
+//! Greedy non-maximum suppression: the distance-based BEV NMS Person-MinkUNet uses (spec §1.12),
+//! CenterPoint's circle NMS and rotated BEV-IoU NMS, and the box voting that may follow any of them.
 //!
-//! Both walk the candidates by descending score (ties keep input order), drop scores not above
+//! All three walk the candidates by descending score (ties keep input order), drop scores not above
 //! `score_threshold` (and NaN), and keep a candidate unless a box *already kept* suppresses it,
 //! which is the result of the GPU kernels' pairwise mask followed by the sequential sweep. Kept
 //! boxes live in a uniform grid whose cell is at least the largest suppression reach, so each
@@ -204,6 +204,30 @@ pub fn nms_distance<S: Copy + Into<f64>>(
     kept
 }
 
+/// CenterPoint's circle NMS: a kept box suppresses every candidate whose BEV centre lies strictly
+/// within `radius` of its own; indices kept, by descending score. Radius 0 keeps every candidate
+/// that passes the threshold.
+pub fn nms_circle<S: Copy + Into<f64>>(
+    boxes: &[Box3d],
+    scores: &[S],
+    radius: f64,
+    cfg: &NmsConfig,
+) -> Vec<usize> {
+    let mut grid = Grid::new(radius);
+    let mut kept = Vec::new();
+    for i in order(boxes, scores, cfg) {
+        if kept.len() >= cfg.max_kept {
+            break;
+        }
+        let b = &boxes[i];
+        if !grid.any_near(b, |k| (boxes[k].cx - b.cx).hypot(boxes[k].cy - b.cy) < radius) {
+            grid.insert(b, i);
+            kept.push(i);
+        }
+    }
+    kept
+}
+
 /// Greedy rotated-BEV-IoU NMS: indices kept, by descending score.
 ///
 /// Two footprints can only overlap when their centres are closer than the sum of their half
@@ -297,6 +321,8 @@ mod tests {
         let cfg = NmsConfig::default();
         assert_eq!(nms_distance(&boxes, &scores, &cfg), vec![1, 2, 3]);
         assert_eq!(nms_bev_iou(&boxes, &scores, &cfg), vec![1, 2, 3]);
+        assert_eq!(nms_circle(&boxes, &scores, 0.5, &cfg), vec![1, 2, 3]);
+        assert_eq!(nms_circle(&boxes, &scores, 0.0, &cfg), vec![1, 2, 0, 3]);
         let cfg = NmsConfig {
             score_threshold: 0.1,
             ..cfg
@@ -337,6 +363,12 @@ mod tests {
                     a, b, &cfg
                 ))
             );
+            for radius in [0.0, 0.3, 0.8] {
+                assert_eq!(
+                    nms_circle(&boxes, &scores, radius, &cfg),
+                    brute(&boxes, &scores, &cfg, |a, b| (a.cx - b.cx).hypot(a.cy - b.cy) < radius)
+                );
+            }
             assert_eq!(
                 nms_bev_iou(&boxes, &scores, &cfg),
                 brute(&boxes, &scores, &cfg, |a, b| bev_iou(a, b)

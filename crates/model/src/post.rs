@@ -2,7 +2,7 @@
 //! output cap.
 
 use data_jrdb::Box3d;
-use eval::nms::{NmsConfig, nms_bev_iou, nms_distance, vote};
+use eval::nms::{NmsConfig, nms_bev_iou, nms_circle, nms_distance, vote};
 
 use crate::config::{NmsKind, PostProcessConfig};
 use crate::detector::Detections;
@@ -51,26 +51,6 @@ fn best_k(boxes: Vec<Box3d>, scores: Vec<f32>, k: usize) -> (Vec<Box3d>, Vec<f32
     idx.truncate(k);
     idx.sort_unstable();
     (idx.iter().map(|&i| boxes[i]).collect(), idx.iter().map(|&i| scores[i]).collect())
-}
-
-/// CenterPoint's circle NMS: greedy by descending score (ties in input order), a candidate is
-/// dropped when a kept centre lies strictly within `radius` in BEV. Radius 0 keeps everything
-/// that passes the threshold.
-pub fn nms_circle(boxes: &[Box3d], scores: &[f32], radius: f64, cfg: &NmsConfig) -> Vec<usize> {
-    assert_eq!(boxes.len(), scores.len(), "one score per box");
-    let mut idx: Vec<usize> = (0..boxes.len()).filter(|&i| scores[i] as f64 > cfg.score_threshold).collect();
-    idx.sort_by(|&a, &b| scores[b].total_cmp(&scores[a]));
-    let mut kept: Vec<usize> = Vec::new();
-    for i in idx {
-        if kept.len() >= cfg.max_kept {
-            break;
-        }
-        let b = &boxes[i];
-        if !kept.iter().any(|&k| (boxes[k].cx - b.cx).hypot(boxes[k].cy - b.cy) < radius) {
-            kept.push(i);
-        }
-    }
-    kept
 }
 
 #[cfg(test)]

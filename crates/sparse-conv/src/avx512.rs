@@ -391,11 +391,10 @@ pub fn pair_conv(
     };
     // The source rows at `srcs`, read in place, times offset k's panels, added to (or, without
     // `accumulate`, written over) destination rows `dst`: row tile by row tile, so a tile's rows
-    // stay in L1 across the panels (for the identity too: panel by panel over the block, as
-    // before, was 3–5 % slower at 96 channels), asking for the next tile's scattered source rows
-    // while this one's run and, for scattered rows written over (the block's first touch of them,
-    // the up forward's), for its destination rows to write: without that the tile's stores wait
-    // on their lines (the up forward at 64 channels: about 10 % faster with it). With
+    // stay in L1 across the panels (the identity too), asking for the next tile's scattered source
+    // rows while this one's run and, for scattered rows written over (the block's first touch of
+    // them, the up forward's), for its destination rows to write: without that the tile's stores
+    // wait on their lines. With
     // `contiguous` (the identity), source row i is `srcs[0] + i·c_src` and `dst[i]` is
     // `dst[0] + i`.
     let multiply_in_place = |k: usize, srcs: &[*const f32], dst: &[u32], contiguous: bool, accumulate: bool, ahead: &mut BlockAhead<'_>| {
@@ -606,8 +605,7 @@ pub fn weight_grad(x: &[f32], c_in: usize, grad_out: &[f32], c_out: usize, pairs
         // it only then, so the FMAs never wait on it): a grouping set by PAIR_BLOCK, not by threads.
         for (block_index, (xs_block, gs_block)) in xs.chunks(PAIR_BLOCK).zip(gs.chunks(PAIR_BLOCK)).enumerate() {
             // The next block's rows are scattered, so the hardware prefetchers cannot see them
-            // coming: ask for them while this block's tiles run, a share per tile (the weight
-            // gradient of a training step: 764–796 ms without, 653–670 with).
+            // coming: ask for them while this block's tiles run, a share per tile.
             let next = ((block_index + 1) * PAIR_BLOCK).min(xs.len())..((block_index + 2) * PAIR_BLOCK).min(xs.len());
             let (mut next_x, mut next_g) = (RowPrefetch::new(&xs[next.clone()], c_in), RowPrefetch::new(&gs[next], c_out));
             let tiles = c_in.div_ceil(MR) * c_out.div_ceil(NR);

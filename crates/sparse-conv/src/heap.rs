@@ -3,15 +3,13 @@
 //! glibc's malloc serves a large block with its own `mmap` (above a threshold that starts at
 //! 128 KiB) and gives it back to the kernel when freed, and trims the heap's free top above
 //! 128 KiB. A training step allocates and frees feature maps of megabytes hundreds of times, so
-//! every step faulted each of them in again, page by page, zeroed by the kernel: measured on
-//! the standard scene, a MinkUNet training step at batch 2 took 7.8 s with 42 % of the process's
-//! time in the kernel, and 5.1–5.8 s once freed memory stays in the heap. Peak RSS is unchanged (the
-//! step's peak is the heap's peak either way).
+//! every step would fault each of them in again, page by page, zeroed by the kernel: a large
+//! share of a step's time (`crates/sparse-conv/README.md` gives the measurement). Peak RSS is
+//! unchanged: the step's peak is the heap's peak either way.
 //!
 //! The same holds for rayon's worker threads: glibc gives each its own arena, whose heaps are
 //! separate mappings of at most 64 MiB, made for a large block and unmapped when emptied (the
-//! trim threshold does not keep them). A sparse conv's fwd+bwd at C = 128 faulted 25 k pages per
-//! call that way (11 ms of its 64). One arena for the process keeps every freed block reusable;
+//! trim threshold does not keep them). One arena for the process keeps every freed block reusable;
 //! the kernels allocate a few scratch tiles per task, so two threads do not contend for it.
 
 /// Largest block glibc lets `mallopt` keep in the heap (`DEFAULT_MMAP_THRESHOLD_MAX` on 64-bit).

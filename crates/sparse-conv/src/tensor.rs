@@ -196,9 +196,4 @@ impl MapCache {
         let index = Arc::new(CoordIndex::build(coords).expect("levels derived from valid coordinates are valid"));
         self.state.lock().unwrap().indexes.entry(stride).or_insert(index).clone()
     }
-
-    /// Number of kernel maps built so far.
-    pub fn num_maps(&self) -> usize {
-        self.state.lock().unwrap().maps.len()
-    }
 }
