@@ -3,9 +3,74 @@
 
 use data_jrdb::Box3d;
 use eval::nms::{NmsConfig, nms_bev_iou, nms_circle, nms_distance, vote};
+use serde::{Deserialize, Serialize};
 
-use crate::config::{NmsKind, PostProcessConfig};
 use crate::detector::Detections;
+
+/// Which greedy NMS post-processing runs.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum NmsKind {
+    /// Person-MinkUNet's distance NMS in BEV (spec §1.12, `eval::nms::nms_distance`).
+    #[default]
+    Distance,
+    /// CenterPoint's circle NMS: suppress centres closer than `circle_radius` in BEV.
+    Circle,
+    /// Rotated BEV IoU NMS (`eval::nms::nms_bev_iou`) above `iou_threshold`.
+    BevIou,
+    /// No suppression (score threshold and cap still apply).
+    None,
+}
+
+/// Score threshold, NMS and box cap applied to each sample's candidate boxes.
+#[derive(Serialize, Deserialize, Debug, Clone, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct PostProcessConfig {
+    /// Candidates with `score <= score_threshold` are dropped before NMS. Default 1e-3, what
+    /// the authors' `filter_submission.py` keeps; the model itself has no threshold (spec §1.12).
+    pub score_threshold: f64,
+    /// NMS flavour.
+    pub nms: NmsKind,
+    /// Distance NMS ratio (0.4, spec §1.12).
+    pub dist_ratio: f64,
+    /// Distance NMS mean person length and width (0.9, 0.5 m).
+    pub mean_lw: [f64; 2],
+    /// Circle NMS radius, metres (about 0.3 m, spec §4).
+    pub circle_radius: f64,
+    /// BEV IoU NMS threshold (0.3).
+    pub iou_threshold: f64,
+    /// At most this many boxes per sample after NMS; `None` keeps all survivors.
+    pub max_boxes: Option<usize>,
+    /// At most this many candidates (the best-scoring) enter NMS; `None`: all that pass the
+    /// threshold (the authors'). Bounds NMS's cost and the near-duplicates it must resolve.
+    pub pre_nms_max: Option<usize>,
+    /// Box voting after NMS: each kept box's centre and size become the score-weighted mean of
+    /// the candidates whose nearest kept centre it is, within this BEV radius (metres); 0: off
+    /// (the authors'). Per-voxel proposals scatter around a person, and the best-scoring one is
+    /// not the best-placed one; their mean is.
+    pub merge_radius: f64,
+    /// With voting, also vote the heading's axis (angles doubled, so votes π apart agree), keeping
+    /// the kept box's own direction along it. A per-voxel heading is a noisy guess; the axis of
+    /// a whole person's votes is not, and IoU depends on the axis alone.
+    pub merge_heading: bool,
+}
+
+impl Default for PostProcessConfig {
+    fn default() -> Self {
+        Self {
+            score_threshold: 1e-3,
+            nms: NmsKind::Distance,
+            dist_ratio: 0.4,
+            mean_lw: [0.9, 0.5],
+            circle_radius: 0.3,
+            iou_threshold: 0.3,
+            max_boxes: None,
+            pre_nms_max: None,
+            merge_radius: 0.0,
+            merge_heading: true,
+        }
+    }
+}
 
 impl PostProcessConfig {
     /// The `eval` NMS settings this config stands for.

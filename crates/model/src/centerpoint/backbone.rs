@@ -7,7 +7,7 @@ use sparse_conv::burn::nn::{BatchNorm, BatchNormConfig, PaddingConfig2d};
 use sparse_conv::burn::tensor::activation::relu;
 use sparse_conv::burn::tensor::{Device, Tensor};
 
-use crate::config::CenterPointConfig;
+use super::config::CenterPointConfig;
 
 /// Conv → BN (eps 1e-3) → ReLU, no conv bias.
 #[derive(Module, Debug)]

@@ -9,7 +9,7 @@ use sparse_conv::burn::tensor::ops::MaxPoolOptions;
 
 use super::grid::BevGrid;
 use super::head::{CHANNELS, DIM, HEIGHT, HM, REG, ROT};
-use crate::config::PostProcessConfig;
+use crate::post::PostProcessConfig;
 use crate::detector::Detections;
 
 /// Heatmap scores with everything but 3×3 local maxima set to 0: `[B, 1, X, Y]` of logits in.

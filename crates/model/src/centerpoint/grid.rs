@@ -1,7 +1,7 @@
 //! The BEV grid of the dense baseline: pillar cells of the input and the coarser cells of the
 //! heatmap. Images are laid out `[B, C, X, Y]`: the third axis is x, the fourth y.
 
-use crate::config::CenterPointConfig;
+use super::config::CenterPointConfig;
 
 /// Pillar grid and output grid of a [`CenterPointConfig`].
 #[derive(Debug, Clone, Copy, PartialEq)]

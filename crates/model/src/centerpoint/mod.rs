@@ -4,6 +4,8 @@
 
 /// 2D backbone with concatenated multi-scale outputs.
 pub mod backbone;
+/// Settings: grid, encoder, backbone, head, targets, loss, post-processing.
+pub mod config;
 /// Heatmap peaks and box decoding.
 pub mod decode;
 /// Pillar feature encoder and BEV scatter.
@@ -21,9 +23,9 @@ use data_jrdb::Batch;
 use sparse_conv::burn::module::Module;
 use sparse_conv::burn::tensor::{Device, Tensor};
 
-use crate::config::CenterPointConfig;
 use crate::detector::{Detections, Detector, LossTerms};
 use backbone::BevBackbone;
+pub use config::CenterPointConfig;
 use encoder::{PillarEncoder, Pillars};
 use grid::BevGrid;
 use head::CenterHead;

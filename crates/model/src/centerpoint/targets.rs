@@ -86,7 +86,7 @@ pub fn assign(batch: &Batch, grid: &BevGrid, min_overlap: f64, min_radius: usize
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::CenterPointConfig;
+    use crate::centerpoint::CenterPointConfig;
     use data_jrdb::Box3d;
 
     #[test]

@@ -1,6 +1,23 @@
 //! Person-MinkUNet: the MinkUNet backbone, a per-voxel linear head (spec §1.8), and the
 //! [`Detector`] implementation tying targets, loss and decoding together.
 
+/// The MinkUNet backbone (spec §1.6).
+pub mod backbone;
+/// The box encoding and head channel layout (spec §1.8).
+pub mod box_coder;
+/// Settings: backbone shape, targets, loss weights, post-processing.
+pub mod config;
+/// Per-voxel boxes and scores from the head's output (spec §1.12).
+pub mod decode;
+/// The five loss terms (spec §1.10).
+pub mod loss;
+/// Per-voxel classification and regression targets (spec §1.9).
+pub mod targets;
+
+pub use backbone::{MinkUNet, MinkUNetConfig, UNetLevels};
+pub use box_coder::BoxCoder;
+pub use config::{PersonMinkUNetConfig, TargetVariant};
+
 use data_jrdb::Batch;
 use sparse_conv::SparseTensor;
 use sparse_conv::modules::per_voxel_linear;
@@ -8,13 +25,10 @@ use sparse_conv::burn::module::Module;
 use sparse_conv::burn::nn::{Linear, LinearConfig};
 use sparse_conv::burn::tensor::{Device, Tensor, TensorData};
 
-use crate::box_coder::BoxCoder;
-use crate::config::PersonMinkUNetConfig;
-use crate::decode::decode;
 use crate::detector::{Detections, Detector, LossTerms};
-use crate::loss::{LossWeights, loss};
-use crate::minkunet::MinkUNet;
-use crate::targets::assign;
+use decode::decode;
+use loss::{LossWeights, loss};
+use targets::assign;
 
 /// The sparse detector: `M × 3` voxel features → `M × (2·bins + 7)` per-voxel outputs.
 #[derive(Module, Debug)]

@@ -1,6 +1,5 @@
 //! The MinkUNet backbone of Person-MinkUNet (SPVNAS layout, spec §1.6).
 
-use burn::config::Config;
 use burn::module::Module;
 use burn::tensor::Device;
 use sparse_conv::{Epilogue, SparseTensor};
@@ -11,15 +10,20 @@ use sparse_conv::modules::{
 
 /// Shape of the backbone: `channels = [stem, down_1..down_n, up_1..up_n]` (2n + 1 entries), each
 /// multiplied by `width` (the paper's `cr`). The defaults are the paper's.
-#[derive(Config, Debug, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct MinkUNetConfig {
     /// Input feature channels (xyz of the voxel's point).
-    #[config(default = 3)]
     pub in_channels: usize,
-    #[config(default = "vec![32, 32, 64, 128, 256, 256, 128, 96, 96]")]
+    /// `[stem, down_1..down_n, up_1..up_n]` before the width factor.
     pub channels: Vec<usize>,
-    #[config(default = 1.0)]
+    /// Width factor on every entry of `channels`.
     pub width: f64,
+}
+
+impl Default for MinkUNetConfig {
+    fn default() -> Self {
+        Self { in_channels: 3, channels: vec![32, 32, 64, 128, 256, 256, 128, 96, 96], width: 1.0 }
+    }
 }
 
 impl MinkUNetConfig {
@@ -38,6 +42,7 @@ impl MinkUNetConfig {
         *self.scaled_channels().last().expect("channels are not empty")
     }
 
+    /// A backbone with fresh parameters (spec §1.6 initialisation).
     pub fn init(&self, device: &Device) -> MinkUNet {
         assert!(
             self.channels.len() >= 3 && self.channels.len() % 2 == 1,

@@ -3,8 +3,8 @@
 
 use data_jrdb::{Batch, Box3d};
 
-use crate::box_coder::BoxCoder;
-use crate::config::TargetVariant;
+use super::box_coder::BoxCoder;
+use super::config::TargetVariant;
 
 /// Targets of one batch, on the CPU; the foreground rows are listed in `fg`.
 #[derive(Debug, Clone, PartialEq, Default)]

@@ -3,8 +3,8 @@
 
 use data_jrdb::{Batch, Box3d};
 
-use crate::box_coder::{BoxCoder, CLS};
-use crate::config::PostProcessConfig;
+use super::box_coder::{BoxCoder, CLS};
+use crate::post::PostProcessConfig;
 use crate::detector::Detections;
 
 /// `1 / (1 + e^{−x})`.

@@ -4,9 +4,9 @@
 use sparse_conv::burn::tensor::activation::{log_sigmoid, log_softmax, relu};
 use sparse_conv::burn::tensor::{Device, Int, Tensor, TensorData};
 
-use crate::box_coder::{BINS, CLS, LOG_DIMS, OFFSET};
+use super::box_coder::{BINS, CLS, LOG_DIMS, OFFSET};
 use crate::detector::LossTerms;
-use crate::targets::VoxelTargets;
+use super::targets::VoxelTargets;
 
 /// Weights of the five terms; the defaults are the authors' code (100, 1, 1, 0.1, 0.01).
 #[derive(Debug, Clone, Copy, PartialEq)]

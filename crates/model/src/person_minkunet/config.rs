@@ -1,0 +1,83 @@
+//! Person-MinkUNet's settings: backbone shape, head, targets, loss weights, post-processing.
+
+use serde::{Deserialize, Serialize};
+use sparse_conv::burn::tensor::Device;
+
+use super::PersonMinkUNet;
+use super::backbone::MinkUNetConfig;
+use crate::post::PostProcessConfig;
+
+/// Which soft classification target (spec §1.9).
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum TargetVariant {
+    /// The authors' code: `d = ‖v − c‖ / (½‖(l + ε, w + ε, h + ε)‖)`.
+    #[default]
+    Code,
+    /// The paper's formula: `d = ‖v − c‖ / (½(‖(l, w, h)‖ + ε))`.
+    Paper,
+}
+
+/// Person-MinkUNet: MinkUNet backbone, per-voxel head, targets, loss and decoding (spec §1.6–1.12).
+#[derive(Serialize, Deserialize, Debug, Clone, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct PersonMinkUNetConfig {
+    /// Input feature channels (raw xyz: 3).
+    pub in_channels: usize,
+    /// Backbone channels `[stem, down_1..down_n, up_1..up_n]` (2n + 1 entries) before `width`.
+    pub channels: Vec<usize>,
+    /// Width factor (the paper's `cr`).
+    pub width: f64,
+    /// Rotation bins (12).
+    pub num_bins: usize,
+    /// Mean person size (l, w, h) the log-dimensions are relative to (0.9, 0.5, 1.7).
+    pub mean_size: [f64; 3],
+    /// ε of the soft classification target (0.2 m).
+    pub epsilon: f64,
+    /// Code or paper form of the soft target.
+    pub target: TargetVariant,
+    /// Weight of the BCE classification term (the code's 100; the paper has 1).
+    pub cls_weight: f64,
+    /// Weight of the centre MSE (1).
+    pub loc_weight: f64,
+    /// Weight of the log-dimension MSE (1).
+    pub dims_weight: f64,
+    /// Weight of the bin cross-entropy (0.1).
+    pub bin_weight: f64,
+    /// Weight of the residual MSE (0.01 = 0.1 × 0.1).
+    pub residual_weight: f64,
+    /// Post-processing of the per-voxel boxes.
+    pub post: PostProcessConfig,
+}
+
+impl Default for PersonMinkUNetConfig {
+    fn default() -> Self {
+        Self {
+            in_channels: 3,
+            channels: vec![32, 32, 64, 128, 256, 256, 128, 96, 96],
+            width: 1.0,
+            num_bins: 12,
+            mean_size: [0.9, 0.5, 1.7],
+            epsilon: 0.2,
+            target: TargetVariant::Code,
+            cls_weight: 100.0,
+            loc_weight: 1.0,
+            dims_weight: 1.0,
+            bin_weight: 0.1,
+            residual_weight: 0.01,
+            post: PostProcessConfig::default(),
+        }
+    }
+}
+
+impl PersonMinkUNetConfig {
+    /// The backbone's configuration.
+    pub fn backbone(&self) -> MinkUNetConfig {
+        MinkUNetConfig { in_channels: self.in_channels, channels: self.channels.clone(), width: self.width }
+    }
+
+    /// A model with freshly initialised parameters on `device`.
+    pub fn init(&self, device: &Device) -> PersonMinkUNet {
+        PersonMinkUNet::new(self, device)
+    }
+}
