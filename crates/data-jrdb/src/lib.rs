@@ -4,6 +4,7 @@
 //! Crate map:
 //! - files: [`pcd`] (+ [`lzf`]), [`labels`], [`calibration`], [`timestamps`], [`split`] (layout and
 //!   splits), [`dataset`] (`JrdbDataset`, `Frame`);
+//! - settings: [`config`] (`DataConfig`, the `[data]` table a run embeds);
 //! - batches: [`augment`] → [`voxelize`] → [`batch`] (`Sample`, `Batch`), driven by [`loader`];
 //! - checks: [`stats`], [`convention`];
 //! - the built-in data: [`sim`] (`synth`).
@@ -17,6 +18,8 @@ pub mod batch;
 pub mod box3d;
 /// LiDAR → base-frame transforms of `defaults.yaml`.
 pub mod calibration;
+/// The `[data]` settings of a run.
+pub mod config;
 /// The box-convention check against `num_points`.
 pub mod convention;
 /// A split of a JRDB tree and its frames.
@@ -47,6 +50,7 @@ pub use augment::{AugmentConfig, Augmentation};
 pub use batch::{Batch, Sample, SampleConfig, collate, prepare};
 pub use box3d::Box3d;
 pub use calibration::{Calibration, Lidar};
+pub use config::{AugmentSection, DataConfig};
 pub use dataset::{DatasetConfig, Frame, JrdbDataset, OnBadFrame};
 pub use error::{DataError, ErrorKind, Result};
 pub use labels::Label;

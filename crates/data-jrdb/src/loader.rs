@@ -94,7 +94,13 @@ impl Loader {
 
     /// The batches of `epoch`, in order; an `Err` ends the epoch.
     pub fn epoch(&self, epoch: u64) -> Batches {
-        let plan = self.plan(epoch);
+        self.epoch_from(epoch, 0)
+    }
+
+    /// The batches of `epoch` from its `skip`-th on, as [`epoch`](Self::epoch) gives them: a
+    /// resumed run continues mid-epoch with the batches it would have seen.
+    pub fn epoch_from(&self, epoch: u64, skip: usize) -> Batches {
+        let plan: Vec<Vec<usize>> = self.plan(epoch).into_iter().skip(skip).collect();
         if !self.cfg.prefetch {
             return Batches { inner: Inner::Direct { loader: self.clone(), epoch, plan: plan.into_iter() } };
         }

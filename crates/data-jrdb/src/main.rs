@@ -36,16 +36,16 @@ enum Cmd {
         #[arg(long)]
         out: PathBuf,
         /// Number of sequences.
-        #[arg(long, default_value_t = 2)]
+        #[arg(long, default_value_t = SynthConfig::default().sequences)]
         sequences: usize,
         /// Frames per sequence.
-        #[arg(long, default_value_t = 10)]
+        #[arg(long, default_value_t = SynthConfig::default().frames)]
         frames: usize,
         /// Seed; the same seed writes the same tree.
         #[arg(long, default_value_t = 0)]
         seed: u64,
         /// Most people per scene.
-        #[arg(long, default_value_t = 40)]
+        #[arg(long, default_value_t = SynthConfig::default().max_people)]
         max_people: usize,
         /// PCD encoding.
         #[arg(long, value_enum, default_value_t = Enc::Binary)]

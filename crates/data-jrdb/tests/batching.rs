@@ -51,6 +51,11 @@ fn loader_is_seeded_and_prefetch_changes_nothing() {
     assert_eq!(a, b);
     assert_eq!(a.len(), 2);
     assert_eq!(a.iter().map(|x| x.len()).sum::<usize>(), 6);
+    // A resumed epoch continues with exactly the batches the full one gives, prefetched or not.
+    for prefetch in [true, false] {
+        let rest: Vec<_> = Loader::new(ds.clone(), LoaderConfig { prefetch, ..cfg.clone() }).epoch_from(0, 1).map(Result::unwrap).collect();
+        assert_eq!(rest, a[1..], "prefetch {prefetch}");
+    }
     let other: Vec<_> = Loader::new(ds.clone(), cfg.clone()).epoch(1).map(Result::unwrap).collect();
     assert_ne!(a, other);
     let batch = &a[0];

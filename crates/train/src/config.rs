@@ -22,7 +22,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
-use data_jrdb::{AugmentConfig, DEFAULT_VAL_SEQUENCES, OnBadFrame, Pooling, SampleConfig, Split, VoxelConfig};
+use data_jrdb::DataConfig;
 use model::ModelConfig;
 use serde::{Deserialize, Serialize};
 
@@ -63,143 +63,6 @@ pub struct RunConfig {
 
 fn default_out_dir() -> PathBuf {
     PathBuf::from("runs")
-}
-
-/// Where the data is and how frames become samples (spec §1.2–§1.5).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct DataConfig {
-    /// JRDB-format tree (a plain root or a folder holding `train_dataset_with_activity/`).
-    /// A relative path is relative to the working directory.
-    pub root: PathBuf,
-    /// If present and `root` does not exist, a simulated tree is generated there first.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub simulate: Option<SimulateConfig>,
-    /// Split trained on.
-    pub train_split: Split,
-    /// Split validated on.
-    pub val_split: Split,
-    /// The validation sequences (default: JRDB's 7, spec §1.2); an entry ending in `*` matches
-    /// every sequence that starts with what precedes it (`sim-val-*` for a simulated benchmark).
-    pub val_sequences: Vec<String>,
-    /// Voxel size in metres (x, y, z).
-    pub voxel_size: [f32; 3],
-    /// A voxel's feature: the first point's xyz (the authors') or the mean.
-    pub pooling: Pooling,
-    /// Training voxel cap per frame (30,000), drawn at random; 0: no cap. Evaluation never caps,
-    /// so a cap trains on sparser frames than it is scored on.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub max_voxels: Option<usize>,
-    /// Training augmentation (spec §1.5).
-    pub augment: AugmentSection,
-    /// Unreadable frames: `fail` or `skip` with a warning.
-    pub on_bad_frame: OnBadFrame,
-    /// Prepare the next training batch on a second thread.
-    pub prefetch: bool,
-}
-
-impl Default for DataConfig {
-    fn default() -> Self {
-        Self {
-            root: PathBuf::from("data/jrdb"),
-            simulate: None,
-            train_split: Split::Train,
-            val_split: Split::Val,
-            val_sequences: DEFAULT_VAL_SEQUENCES.map(String::from).to_vec(),
-            voxel_size: [0.05, 0.05, 0.1],
-            pooling: Pooling::First,
-            max_voxels: Some(30_000),
-            augment: AugmentSection::default(),
-            on_bad_frame: OnBadFrame::Fail,
-            prefetch: true,
-        }
-    }
-}
-
-impl DataConfig {
-    /// Per-frame processing of training samples.
-    pub fn train_sample(&self) -> SampleConfig {
-        SampleConfig {
-            voxel: VoxelConfig { voxel_size: self.voxel_size, pooling: self.pooling },
-            augment: self.augment.enabled.then_some(AugmentConfig { scale: self.augment.scale, rotate: self.augment.rotate }),
-            max_voxels: self.max_voxels.filter(|&m| m > 0),
-        }
-    }
-
-    /// Per-frame processing at evaluation: no augmentation, no cap.
-    pub fn eval_sample(&self) -> SampleConfig {
-        SampleConfig { voxel: VoxelConfig { voxel_size: self.voxel_size, pooling: self.pooling }, augment: None, max_voxels: None }
-    }
-}
-
-/// Training augmentation: `p ↦ s·R(α)·p`, `s ~ U(scale)`, `α ~ U(0, 2π)` (spec §1.5).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct AugmentSection {
-    /// Augment at all.
-    pub enabled: bool,
-    /// Range of the scale factor.
-    pub scale: [f64; 2],
-    /// Random rotation about z.
-    pub rotate: bool,
-}
-
-impl Default for AugmentSection {
-    fn default() -> Self {
-        Self { enabled: true, scale: [0.95, 1.05], rotate: true }
-    }
-}
-
-/// The simulated dataset generated when `data.root` is missing (deterministic by `seed`).
-///
-/// `preset = "bench-v1"` names the simulated benchmark (`data_jrdb::sim::Preset`); keys written
-/// beside it override the preset's values, keys left out take the preset's (or, without a
-/// preset, the plain defaults below).
-#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct SimulateConfig {
-    /// A named benchmark the other keys start from.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub preset: Option<data_jrdb::sim::Preset>,
-    /// Sequences (8 without a preset); each is its own scene.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub sequences: Option<usize>,
-    /// Frames per sequence (30 without a preset).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub frames: Option<usize>,
-    /// Seed of the scenes and scans.
-    pub seed: u64,
-    /// Most people per scene (40 without a preset).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub max_people: Option<usize>,
-    /// People farther than this (BEV metres) are not labelled (35 without a preset).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub label_range: Option<f64>,
-    /// Simulation steps of 1/15 s between written frames (1 without a preset).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub frame_step: Option<usize>,
-    /// Sequence names: `jrdb` (JRDB's, its default split) or `benchmark` (`sim-val-*` for validation).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub naming: Option<data_jrdb::sim::Naming>,
-}
-
-impl SimulateConfig {
-    /// The simulator's own config: the preset's (or the plain defaults), then the keys set here.
-    pub fn synth(&self) -> data_jrdb::sim::SynthConfig {
-        let base = match self.preset {
-            Some(p) => p.synth(self.seed),
-            None => data_jrdb::sim::SynthConfig { sequences: 8, frames: 30, seed: self.seed, ..Default::default() },
-        };
-        data_jrdb::sim::SynthConfig {
-            sequences: self.sequences.unwrap_or(base.sequences),
-            frames: self.frames.unwrap_or(base.frames),
-            max_people: self.max_people.unwrap_or(base.max_people),
-            label_range: self.label_range.unwrap_or(base.label_range),
-            frame_step: self.frame_step.unwrap_or(base.frame_step),
-            naming: self.naming.unwrap_or(base.naming),
-            ..base
-        }
-    }
 }
 
 /// Optimisation (spec §1.11): Adam with AMSGrad, the lr set every iteration from the fractional epoch.
@@ -431,7 +294,8 @@ mod tests {
         assert_eq!(s, data_jrdb::sim::SynthConfig { frames: 2, ..bench });
         let plain = RunConfig::from_toml_str(&format!("{MIN}[data.simulate]\nsequences = 3\n")).unwrap();
         let s = plain.data.simulate.unwrap().synth();
-        assert_eq!((s.sequences, s.frames, s.max_people, s.frame_step), (3, 30, 40, 1));
+        let simulator = data_jrdb::sim::SynthConfig::default();
+        assert_eq!((s.sequences, s.frames, s.max_people), (3, simulator.frames, simulator.max_people), "the simulator's defaults");
         assert!(RunConfig::from_toml_str(&format!("{MIN}[data.simulate]\npreset = \"bench-v9\"\n")).is_err());
     }
 

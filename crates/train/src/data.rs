@@ -1,13 +1,12 @@
 //! The run's data: the simulated tree generated on first use, the two splits, and their loaders.
 
 use std::sync::Arc;
-use std::sync::mpsc::sync_channel;
 
 use anyhow::{Context, Result, bail};
 use data_jrdb::sim::{SynthSummary, synth};
-use data_jrdb::{Batch, DatasetConfig, JrdbDataset, Loader, LoaderConfig, NonFinite, Split};
+use data_jrdb::{DataConfig, JrdbDataset, Loader, LoaderConfig, Split};
 
-use crate::config::{DataConfig, RunConfig};
+use crate::config::RunConfig;
 
 /// Makes sure `data.root` exists: when it does not and the config has `[data.simulate]`, the
 /// simulated tree is generated there (into a temporary sibling folder renamed into place when
@@ -45,14 +44,7 @@ pub fn ensure_dataset(cfg: &DataConfig) -> Result<Option<SynthSummary>> {
 
 /// Opens one split of the tree, keeping every `stride`-th frame.
 pub fn open_split(cfg: &DataConfig, split: Split, stride: usize) -> Result<Arc<JrdbDataset>> {
-    let dcfg = DatasetConfig {
-        split,
-        val_sequences: cfg.val_sequences.clone(),
-        sequences: None,
-        non_finite: NonFinite::Drop,
-        on_bad_frame: cfg.on_bad_frame,
-        require_labels: true,
-    };
+    let dcfg = cfg.dataset(split);
     let mut ds = JrdbDataset::open(&cfg.root, &dcfg).with_context(|| format!("opening {:?} split of {}", split, cfg.root.display()))?;
     if stride > 1 {
         ds.frames = ds.frames.into_iter().step_by(stride).collect();
@@ -96,28 +88,3 @@ pub fn eval_loader(cfg: &RunConfig, split: Split) -> Result<Loader> {
         },
     ))
 }
-
-/// The batches of `epoch` from its `skip`-th on (a resumed run starts mid-epoch), prepared one
-/// ahead on a second thread when `prefetch`. Batches whose frames were all skipped are left out.
-pub fn batches_from(loader: &Loader, epoch: u64, skip: usize, prefetch: bool) -> Box<dyn Iterator<Item = Result<Batch>> + Send> {
-    let plan: Vec<Vec<usize>> = loader.plan(epoch).into_iter().skip(skip).collect();
-    if !prefetch {
-        let loader = loader.clone();
-        return Box::new(
-            plan.into_iter().map(move |f| loader.make_batch(epoch, &f).map_err(anyhow::Error::from)).filter(|r| !matches!(r, Ok(b) if b.is_empty())),
-        );
-    }
-    let (tx, rx) = sync_channel(1);
-    let loader = loader.clone();
-    std::thread::spawn(move || {
-        for frames in plan {
-            let r = loader.make_batch(epoch, &frames).map_err(anyhow::Error::from);
-            let stop = r.is_err();
-            if tx.send(r).is_err() || stop {
-                break;
-            }
-        }
-    });
-    Box::new(rx.into_iter().filter(|r| !matches!(r, Ok(b) if b.is_empty())))
-}
-

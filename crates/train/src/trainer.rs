@@ -22,7 +22,7 @@ use sparse_conv::FusedAdamConfig;
 use crate::backend::init_threads;
 use crate::checkpoint::{Checkpoints, Slot, TrainState};
 use crate::config::{OptimizerConfig, RunConfig};
-use crate::data::{batches_from, ensure_dataset, eval_loader, train_loader};
+use crate::data::{ensure_dataset, eval_loader, train_loader};
 use crate::metrics::{CsvLog, epoch_header, field, step_header, truncate_after};
 use crate::run_dir::{RunDir, write_atomic};
 use crate::validate::{HeadingError, format_by_range, validate};
@@ -156,7 +156,7 @@ pub fn train_model<D: Detector>(mut model: D, cfg: &RunConfig, run: &RunDir, opt
         let pb = if opts.verbose { progress::bar(n as u64, &format!("epoch {}/{epochs}", state.epoch + 1)) } else { ProgressBar::hidden() };
         pb.set_position(state.batch as u64);
         pb.reset_eta();
-        for batch in batches_from(&loader, state.epoch as u64, state.batch, cfg.data.prefetch) {
+        for batch in loader.epoch_from(state.epoch as u64, state.batch) {
             if opts.max_steps.is_some_and(|m| state.step >= m) {
                 pb.finish_and_clear();
                 break 'epochs;

@@ -1,0 +1,112 @@
+//! The `[data]` settings of a run: where the tree is, which frames form each split, and how a
+//! frame becomes a sample. The runner embeds this table as it is; every default is the authors'.
+
+use std::path::PathBuf;
+
+use serde::{Deserialize, Serialize};
+
+use crate::augment::AugmentConfig;
+use crate::batch::SampleConfig;
+use crate::dataset::{DatasetConfig, OnBadFrame};
+use crate::pcd::NonFinite;
+use crate::sim::SimulateConfig;
+use crate::split::{DEFAULT_VAL_SEQUENCES, Split};
+use crate::voxelize::{Pooling, VoxelConfig};
+
+/// Where the data is and how frames become samples (spec §1.2–§1.5).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DataConfig {
+    /// JRDB-format tree (a plain root or a folder holding `train_dataset_with_activity/`).
+    /// A relative path is relative to the working directory.
+    pub root: PathBuf,
+    /// If present and `root` does not exist, a simulated tree is generated there first.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub simulate: Option<SimulateConfig>,
+    /// Split trained on.
+    pub train_split: Split,
+    /// Split validated on.
+    pub val_split: Split,
+    /// The validation sequences (default: JRDB's 7, spec §1.2); an entry ending in `*` matches
+    /// every sequence that starts with what precedes it (`sim-val-*` for a simulated benchmark).
+    pub val_sequences: Vec<String>,
+    /// Voxel size in metres (x, y, z).
+    pub voxel_size: [f32; 3],
+    /// A voxel's feature: the first point's xyz (the authors') or the mean.
+    pub pooling: Pooling,
+    /// Training voxel cap per frame (30,000), drawn at random; 0: no cap. Evaluation never caps,
+    /// so a cap trains on sparser frames than it is scored on.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_voxels: Option<usize>,
+    /// Training augmentation (spec §1.5).
+    pub augment: AugmentSection,
+    /// Unreadable frames: `fail` or `skip` with a warning.
+    pub on_bad_frame: OnBadFrame,
+    /// Prepare the next training batch on a second thread.
+    pub prefetch: bool,
+}
+
+impl Default for DataConfig {
+    fn default() -> Self {
+        Self {
+            root: PathBuf::from("data/jrdb"),
+            simulate: None,
+            train_split: Split::Train,
+            val_split: Split::Val,
+            val_sequences: DEFAULT_VAL_SEQUENCES.map(String::from).to_vec(),
+            voxel_size: [0.05, 0.05, 0.1],
+            pooling: Pooling::First,
+            max_voxels: Some(30_000),
+            augment: AugmentSection::default(),
+            on_bad_frame: OnBadFrame::Fail,
+            prefetch: true,
+        }
+    }
+}
+
+impl DataConfig {
+    /// Per-frame processing of training samples.
+    pub fn train_sample(&self) -> SampleConfig {
+        SampleConfig {
+            voxel: VoxelConfig { voxel_size: self.voxel_size, pooling: self.pooling },
+            augment: self.augment.enabled.then_some(AugmentConfig { scale: self.augment.scale, rotate: self.augment.rotate }),
+            max_voxels: self.max_voxels.filter(|&m| m > 0),
+        }
+    }
+
+    /// Per-frame processing at evaluation: no augmentation, no cap.
+    pub fn eval_sample(&self) -> SampleConfig {
+        SampleConfig { voxel: VoxelConfig { voxel_size: self.voxel_size, pooling: self.pooling }, augment: None, max_voxels: None }
+    }
+
+    /// What opening `split` of the tree needs: the validation sequences, labels required,
+    /// non-finite points dropped.
+    pub fn dataset(&self, split: Split) -> DatasetConfig {
+        DatasetConfig {
+            split,
+            val_sequences: self.val_sequences.clone(),
+            sequences: None,
+            non_finite: NonFinite::Drop,
+            on_bad_frame: self.on_bad_frame,
+            require_labels: true,
+        }
+    }
+}
+
+/// Training augmentation: `p ↦ s·R(α)·p`, `s ~ U(scale)`, `α ~ U(0, 2π)` (spec §1.5).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct AugmentSection {
+    /// Augment at all.
+    pub enabled: bool,
+    /// Range of the scale factor.
+    pub scale: [f64; 2],
+    /// Random rotation about z.
+    pub rotate: bool,
+}
+
+impl Default for AugmentSection {
+    fn default() -> Self {
+        Self { enabled: true, scale: [0.95, 1.05], rotate: true }
+    }
+}
