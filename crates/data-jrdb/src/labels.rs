@@ -20,6 +20,9 @@ pub struct Label {
     pub bbox: Box3d,
     /// LiDAR points inside the box according to the annotation (`attributes.num_points`).
     pub num_points: i64,
+    /// `observation_angle` (−1 where the file has none): KITTI's `alpha` column when the labels
+    /// are converted for the official evaluator, which does not score it.
+    pub observation_angle: f64,
 }
 
 /// Labels of one sequence, by PCD file name (`000123.pcd`).
@@ -70,7 +73,11 @@ fn parse_labels(doc: &Value) -> std::result::Result<SequenceLabels, (String, Str
                 .as_i64()
                 .or_else(|| np.as_f64().filter(|f| f.fract() == 0.0).map(|f| f as i64))
                 .ok_or((format!("{at}.attributes.num_points"), format!("`{np}` is not an integer")))?;
-            kept.push(Label { id: id.to_string(), bbox, num_points });
+            let observation_angle = match item.get("observation_angle") {
+                None | Some(Value::Null) => -1.0,
+                Some(v) => v.as_f64().ok_or((format!("{at}.observation_angle"), format!("`{v}` is not a number")))?,
+            };
+            kept.push(Label { id: id.to_string(), bbox, num_points, observation_angle });
         }
         out.insert(frame.clone(), kept);
     }
@@ -90,7 +97,7 @@ pub fn write_labels(path: &Path, labels: &SequenceLabels) -> Result<()> {
                     "box": {"cx": b.cx, "cy": b.cy, "cz": b.cz, "l": b.l, "w": b.w, "h": b.h, "rot_z": b.rot_z},
                     "attributes": {"num_points": l.num_points, "distance": b.bev_range(), "no_eval": false,
                                    "interpolated": false, "occlusion": if l.num_points >= 10 { "Fully_visible" } else { "Severely_occluded" }},
-                    "observation_angle": b.cy.atan2(b.cx) - b.rot_z,
+                    "observation_angle": l.observation_angle,
                     "file_id": frame,
                 })
             })
@@ -116,6 +123,7 @@ mod tests {
         assert_eq!(l["000000.pcd"].len(), 1);
         assert_eq!(l["000000.pcd"][0].num_points, 42);
         assert_eq!(l["000000.pcd"][0].bbox.rot_z, -0.3);
+        assert_eq!(l["000000.pcd"][0].observation_angle, -1.0, "absent");
         assert!(l["000001.pcd"].is_empty());
         let bad = json!({"labels": {"000000.pcd": [{"label_id": "pedestrian:1", "box": {"cx": 1}, "attributes": {"num_points": 1}}]}});
         let (key, _) = parse_labels(&bad).unwrap_err();

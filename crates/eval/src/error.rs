@@ -48,6 +48,9 @@ pub enum EvalError {
         /// Where the detections were looked for.
         expected: PathBuf,
     },
+    /// A JRDB file read by data-jrdb's readers (labels), with the file and the key at fault.
+    #[error(transparent)]
+    Data(#[from] data_jrdb::DataError),
     /// A folder that is not laid out as the chosen format requires.
     #[error("{}: {message}", path.display())]
     Layout {

@@ -21,42 +21,11 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use data_jrdb::Box3d;
+use data_jrdb::{Box3d, Label};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{EvalError, Result};
 use crate::kitti::KittiObject;
-
-/// One 3D label of a `labels_3d` file.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Label3d {
-    /// `"<class>:<id>"`, e.g. `"pedestrian:46"`.
-    pub label_id: String,
-    /// The box, JRDB base frame.
-    #[serde(rename = "box")]
-    pub bbox: Box3d,
-    /// Attributes; only `num_points` is needed for evaluation.
-    pub attributes: Attributes,
-    /// Observation angle (written to KITTI's `alpha` column).
-    #[serde(default = "minus_one")]
-    pub observation_angle: f64,
-}
-
-fn minus_one() -> f64 {
-    -1.0
-}
-
-/// The attributes of a 3D label that evaluation reads.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct Attributes {
-    /// LiDAR points inside the box.
-    pub num_points: i32,
-}
-
-#[derive(Deserialize)]
-struct LabelsFile {
-    labels: BTreeMap<String, Vec<Label3d>>,
-}
 
 /// One detection: a box and its score.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -90,30 +59,22 @@ fn read_json<T: for<'de> Deserialize<'de>>(path: &Path) -> Result<T> {
     serde_json::from_str(&text).map_err(|e| EvalError::json(path, &e))
 }
 
-/// Reads a `labels_3d/<sequence>.json` file: frame name (no extension) → all labels, in file order.
-pub fn read_labels_3d(path: &Path) -> Result<BTreeMap<String, Vec<Label3d>>> {
-    let file: LabelsFile = read_json(path)?;
-    Ok(file
-        .labels
+/// Reads a `labels_3d/<sequence>.json` file with data-jrdb's reader (the one training uses):
+/// frame name (no extension) → its pedestrian labels, in file order.
+pub fn read_labels_3d(path: &Path) -> Result<BTreeMap<String, Vec<Label>>> {
+    Ok(data_jrdb::labels::read_labels(path)?
         .into_iter()
         .map(|(k, v)| (frame_key(&k), v))
         .collect())
 }
 
-/// The KITTI lines the official converter writes for one frame's labels: pedestrians only, in
-/// label order, with `num_points` and `observation_angle` carried over.
-pub fn labels_to_kitti(labels: &[Label3d]) -> Vec<KittiObject> {
+/// The KITTI lines the official converter writes for one frame's labels: pedestrians, in label
+/// order, with `num_points` and `observation_angle` carried over.
+pub fn labels_to_kitti(labels: &[Label]) -> Vec<KittiObject> {
     labels
         .iter()
-        .filter(|l| l.label_id.starts_with("pedestrian:"))
-        .map(|l| {
-            let mut k = KittiObject::from_box3d(&l.bbox, l.attributes.num_points, 1.0);
-            // Without the 2D labels the converter leaves these at −1.
-            k.truncated = -1;
-            k.occluded = -1;
-            k.alpha = l.observation_angle;
-            k
-        })
+        .filter(|l| l.id.starts_with("pedestrian:"))
+        .map(|l| KittiObject::ground_truth(&l.bbox, l.num_points, l.observation_angle))
         .collect()
 }
 
@@ -185,7 +146,7 @@ mod tests {
         );
         std::fs::write(&p, "{\"labels\": {\"000000.pcd\": [}}").unwrap();
         let e = read_labels_3d(&p).unwrap_err().to_string();
-        assert!(e.contains("seq.json:1:28"), "{e}");
+        assert!(e.contains("seq.json") && e.contains("line 1 column 28"), "{e}");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

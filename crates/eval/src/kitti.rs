@@ -113,6 +113,18 @@ impl KittiObject {
         }
     }
 
+    /// A ground-truth line for a JRDB label, as the official converter writes it without the 2D
+    /// labels: truncation and occlusion −1, `num_points` (clamped to `i32`) and the observation
+    /// angle carried over, score 1.
+    pub fn ground_truth(b: &Box3d, num_points: i64, observation_angle: f64) -> Self {
+        KittiObject {
+            truncated: -1,
+            occluded: -1,
+            alpha: observation_angle,
+            ..Self::from_box3d(b, num_points.clamp(i32::MIN as i64, i32::MAX as i64) as i32, 1.0)
+        }
+    }
+
     /// The JRDB box of this line (inverse of [`KittiObject::from_box3d`], up to rounding of `cz`).
     pub fn to_box3d(&self) -> Box3d {
         Box3d {

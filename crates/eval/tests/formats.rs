@@ -282,7 +282,7 @@ fn malformed_files_name_file_line_and_column() {
         e.ends_with("det/s/000000.txt:3: column 17: score: expected a number, found `high`"),
         "{e}"
     );
-    // Broken JSON names line and column.
+    // A label that is not what JRDB writes.
     write(
         &tmp.0.join("lab/s.json"),
         "{\"labels\": {\n \"000000.pcd\": [{\"label_id\": 3}]}}",
@@ -295,7 +295,9 @@ fn malformed_files_name_file_line_and_column() {
         true,
     )
     .unwrap_err();
-    assert!(matches!(e, EvalError::Json { line: 2, .. }), "{e}");
+    // A label of the wrong shape names the file and the key (data-jrdb's reader, as training's).
+    assert!(matches!(e, EvalError::Data(_)), "{e}");
+    assert!(e.to_string().contains("lab/s.json") && e.to_string().contains("label_id"), "{e}");
     // A missing folder, and a folder of neither format.
     let e = load(
         &tmp.0.join("nowhere"),

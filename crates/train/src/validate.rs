@@ -36,13 +36,7 @@ impl FrameResult {
             .gt
             .iter()
             .zip(&self.num_points)
-            .map(|(b, &n)| {
-                let mut k = KittiObject::from_box3d(b, n.clamp(i32::MIN as i64, i32::MAX as i64) as i32, 1.0);
-                // As the official converter without 2D labels.
-                k.truncated = -1;
-                k.occluded = -1;
-                k
-            })
+            .map(|(b, &n)| KittiObject::ground_truth(b, n, -1.0))
             .collect();
         Frame { sequence: self.sequence.clone(), name: self.name.clone(), gt, det: detections_to_kitti(&self.detections) }
     }

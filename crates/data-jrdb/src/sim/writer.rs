@@ -228,7 +228,8 @@ fn synth_sequence(layout: &Layout, seq: &str, index: u64, cfg: &SynthConfig, cal
                 continue;
             }
             let np = b.count_inside(&base_points) as i64;
-            frame_labels.push(Label { id: format!("pedestrian:{}", v.id), bbox: b, num_points: np });
+            let observation_angle = b.cy.atan2(b.cx) - b.rot_z;
+            frame_labels.push(Label { id: format!("pedestrian:{}", v.id), bbox: b, num_points: np, observation_angle });
         }
         n_boxes += frame_labels.len();
         labels.insert(format!("{name}.pcd"), frame_labels);
