@@ -111,6 +111,26 @@ impl Batch {
     pub fn num_voxels(&self) -> usize {
         self.coords.len()
     }
+
+    /// The feature (the voxel's point, metres) of voxel `row`.
+    pub fn point(&self, row: usize) -> [f32; 3] {
+        [0, 1, 2].map(|k| self.features[3 * row + k])
+    }
+
+    /// The centre (metres) of voxel `row`: what its box offsets are relative to.
+    pub fn centre(&self, row: usize) -> [f32; 3] {
+        [0, 1, 2].map(|k| self.centres[3 * row + k])
+    }
+
+    /// The voxel rows of sample `b`.
+    pub fn rows(&self, b: usize) -> std::ops::Range<usize> {
+        self.offsets[b]..self.offsets[b + 1]
+    }
+
+    /// The points (voxel features) of sample `b`.
+    pub fn points(&self, b: usize) -> Vec<[f32; 3]> {
+        self.rows(b).map(|r| self.point(r)).collect()
+    }
 }
 
 /// Stacks samples into one batch; the batch index is each sample's position.

@@ -15,6 +15,7 @@ use burn::optim::decay::WeightDecayConfig;
 use burn::optim::{GradientsParams, ModuleOptimizer};
 use burn::tensor::Device;
 use indicatif::ProgressBar;
+use data_jrdb::{Batch, Loader};
 use model::{Detector, LossTerms, ModelConfig};
 use serde::{Deserialize, Serialize};
 use sparse_conv::FusedAdamConfig;
@@ -104,138 +105,229 @@ fn term_names(terms: &LossTerms) -> Vec<String> {
 
 /// Trains `model` (initialised on `device.autodiff()`) as `cfg` says, writing into `run`.
 /// `device` is the plain device of the backend; validation runs there.
-pub fn train_model<D: Detector>(mut model: D, cfg: &RunConfig, run: &RunDir, opts: &TrainOptions, device: &Device) -> Result<TrainSummary> {
+pub fn train_model<D: Detector>(model: D, cfg: &RunConfig, run: &RunDir, opts: &TrainOptions, device: &Device) -> Result<TrainSummary> {
     let ad = device.clone().autodiff();
-    let name = cfg.name.clone().unwrap_or_else(|| "run".into());
-    ensure_dataset(&cfg.data)?;
-    let loader = train_loader(cfg)?;
-    let val_loader = eval_loader(cfg, cfg.data.val_split)?;
-    let n = loader.batches_per_epoch();
-    if n == 0 {
-        bail!("the training split has fewer frames ({}) than one batch ({}) with drop_last", loader.dataset().len(), cfg.train.batch_size);
-    }
+    let mut session = Session::set_up(cfg, run, opts)?;
     let params = model.num_params();
-    let mut optim = optimizer(&cfg.train.optimizer);
-    let ckpts = Checkpoints::new(run.checkpoints());
-    let mut state = TrainState { seed: cfg.seed, ..Default::default() };
-    if opts.resume {
-        match ckpts.get(Slot::Latest)? {
-            Some(files) => {
-                state = files.read_state()?;
-                if state.seed != cfg.seed {
-                    bail!("checkpoint seed {} differs from the config's {}", state.seed, cfg.seed);
-                }
-                model = files.load_model(model)?;
-                optim = files.load_optim(optim)?;
-                if opts.verbose {
-                    eprintln!("resuming {} at step {} (epoch {}, batch {}/{n})", run.root.display(), state.step, state.epoch + 1, state.batch);
-                }
-            }
-            None => {
-                if opts.verbose {
-                    eprintln!("no checkpoint in {} yet: starting from step 0", run.root.display());
-                }
-            }
-        }
-        truncate_after(&run.metrics_csv(), "step", state.step as f64)?;
-        truncate_after(&run.epochs_csv(), "epoch", state.epoch as f64)?;
-    }
-    let epochs = cfg.train.epochs;
-    let stop_epochs = opts.max_epochs.map_or(epochs, |m| m.min(epochs));
-    let mut step_log: Option<CsvLog> = None;
-    let mut epoch_log: Option<CsvLog> = None;
-    let mut saved_step = state.step;
-    let (mut last_by_range, mut last_heading) = (None, None);
-    if opts.verbose {
-        eprintln!("{name}: {} ({} parameters), {} train frames / {} val frames, {n} steps per epoch, backend {:?}", cfg.model.kind(), params, loader.dataset().len(), val_loader.dataset().len(), cfg.backend);
-    }
-    'epochs: while state.epoch < stop_epochs {
-        if opts.max_steps.is_some_and(|m| state.step >= m) {
+    let (mut model, mut optim) = session.resume(model, optimizer(&cfg.train.optimizer))?;
+    session.announce(params);
+    'epochs: while session.state.epoch < session.stop_epochs {
+        if session.steps_exhausted() {
             break;
         }
-        let pb = if opts.verbose { progress::bar(n as u64, &format!("epoch {}/{epochs}", state.epoch + 1)) } else { ProgressBar::hidden() };
-        pb.set_position(state.batch as u64);
-        pb.reset_eta();
-        for batch in loader.epoch_from(state.epoch as u64, state.batch) {
-            if opts.max_steps.is_some_and(|m| state.step >= m) {
+        let pb = session.epoch_bar();
+        for batch in session.loader.epoch_from(session.state.epoch as u64, session.state.batch) {
+            if session.steps_exhausted() {
                 pb.finish_and_clear();
                 break 'epochs;
             }
-            let batch = batch?;
-            let t0 = Instant::now();
-            let e = state.epoch as f64 + state.batch as f64 / n as f64;
-            let lr = cfg.train.schedule.lr(e, epochs);
-            let terms = model.loss(&batch, &ad);
-            let names = term_names(&terms);
-            let loss = terms.total.clone().into_scalar::<f32>() as f64;
-            let values: Vec<f64> = terms.terms.iter().map(|(_, t)| t.clone().into_scalar::<f32>() as f64).collect();
-            if !loss.is_finite() || values.iter().any(|v| !v.is_finite()) {
-                pb.finish_and_clear();
-                let parts: Vec<String> = names.iter().zip(&values).map(|(n, v)| format!("{n} {v}")).collect();
-                bail!(
-                    "non-finite loss at step {} (epoch {}, batch {}/{n}): loss {loss} ({}); stopped without writing a checkpoint, the last good one is kept in {}",
-                    state.step + 1,
-                    state.epoch + 1,
-                    state.batch + 1,
-                    parts.join(", "),
-                    run.checkpoints().display()
-                );
-            }
-            let grads = GradientsParams::from_grads(terms.total.backward(), &model);
-            model = optim.step(lr, model, grads);
-            let secs = t0.elapsed().as_secs_f64();
-            state.step += 1;
-            state.batch += 1;
-            state.time += secs;
-            state.epoch_seconds += secs;
-            accumulate(&mut state.epoch_sums, "loss", loss);
-            for (nm, v) in names.iter().zip(&values) {
-                accumulate(&mut state.epoch_sums, nm, *v);
-            }
-            let log = match &mut step_log {
-                Some(l) => l,
-                None => step_log.insert(CsvLog::open(&run.metrics_csv(), &step_header(&names))?),
-            };
-            let mut row = vec![state.step.to_string(), field(Some(e)), field(Some(lr)), field(Some(loss))];
-            row.extend(values.iter().map(|v| field(Some(*v))));
-            row.extend([field(Some(secs)), field(Some(state.time))]);
-            log.append(&row)?;
-            if epoch_log.is_none() {
-                epoch_log = Some(CsvLog::open(&run.epochs_csv(), &epoch_header(&names))?);
-            }
-            pb.set_message(format!("loss {loss:.4} lr {lr:.2e}"));
-            pb.inc(1);
-            if cfg.train.checkpoint_every > 0 && state.step % cfg.train.checkpoint_every == 0 && state.batch < n {
-                ckpts.save(&model, &optim, &state, &[Slot::Latest])?;
-                saved_step = state.step;
-            }
+            model = session.step(model, &mut optim, &batch?, &ad, &pb)?;
         }
         pb.finish_and_clear();
-        if state.batch < n {
-            // The epoch's batches ran out early: only frames that were all skipped do that.
-            if opts.max_steps.is_some_and(|m| state.step >= m) {
-                break;
-            }
+        // The epoch's batches ran out early (only frames that were all skipped do that).
+        if session.state.batch < session.n && session.steps_exhausted() {
+            break;
         }
-        // The epoch is done.
-        let done = state.epoch + 1;
-        let due = (cfg.train.val_every > 0 && done.is_multiple_of(cfg.train.val_every)) || done == epochs || done == stop_epochs;
-        let val = if due { Some(validate(&model.valid(), &val_loader, device, &cfg.eval.protocol(), opts.verbose)?) } else { None };
+        session.end_epoch(&model, &optim, device)?;
+    }
+    session.finish(&model, &optim, params)
+}
+
+/// A training invocation's state apart from the model and its optimiser: the data, the position
+/// in the schedule, the CSV logs and the checkpoints. The loop above calls its parts in order:
+/// set-up and resume, one step per batch, the end of each epoch, the end of the run.
+struct Session<'a> {
+    cfg: &'a RunConfig,
+    run: &'a RunDir,
+    opts: &'a TrainOptions,
+    name: String,
+    loader: Loader,
+    val_loader: Loader,
+    /// Batches per epoch.
+    n: usize,
+    /// `train.epochs`: what the schedule spans.
+    epochs: usize,
+    /// Where this invocation stops (`--max-epochs`).
+    stop_epochs: usize,
+    ckpts: Checkpoints,
+    state: TrainState,
+    step_log: Option<CsvLog>,
+    epoch_log: Option<CsvLog>,
+    /// The step of the last checkpoint written.
+    saved_step: u64,
+    last_by_range: Option<[[f64; 3]; 3]>,
+    last_heading: Option<HeadingError>,
+}
+
+impl<'a> Session<'a> {
+    /// The data (generated on first use) and its loaders, a fresh position.
+    fn set_up(cfg: &'a RunConfig, run: &'a RunDir, opts: &'a TrainOptions) -> Result<Self> {
+        ensure_dataset(&cfg.data)?;
+        let loader = train_loader(cfg)?;
+        let val_loader = eval_loader(cfg, cfg.data.val_split)?;
+        let n = loader.batches_per_epoch();
+        if n == 0 {
+            bail!("the training split has fewer frames ({}) than one batch ({}) with drop_last", loader.dataset().len(), cfg.train.batch_size);
+        }
+        let epochs = cfg.train.epochs;
+        Ok(Session {
+            cfg,
+            run,
+            opts,
+            name: cfg.name.clone().unwrap_or_else(|| "run".into()),
+            loader,
+            val_loader,
+            n,
+            epochs,
+            stop_epochs: opts.max_epochs.map_or(epochs, |m| m.min(epochs)),
+            ckpts: Checkpoints::new(run.checkpoints()),
+            state: TrainState { seed: cfg.seed, ..Default::default() },
+            step_log: None,
+            epoch_log: None,
+            saved_step: 0,
+            last_by_range: None,
+            last_heading: None,
+        })
+    }
+
+    /// With `--resume`, the latest checkpoint's weights, optimiser state and position, and the
+    /// CSV rows written after it dropped; otherwise what it was given.
+    fn resume<D: Detector>(&mut self, mut model: D, mut optim: ModuleOptimizer) -> Result<(D, ModuleOptimizer)> {
+        if self.opts.resume {
+            match self.ckpts.get(Slot::Latest)? {
+                Some(files) => {
+                    self.state = files.read_state()?;
+                    if self.state.seed != self.cfg.seed {
+                        bail!("checkpoint seed {} differs from the config's {}", self.state.seed, self.cfg.seed);
+                    }
+                    model = files.load_model(model)?;
+                    optim = files.load_optim(optim)?;
+                    if self.opts.verbose {
+                        let s = &self.state;
+                        eprintln!("resuming {} at step {} (epoch {}, batch {}/{})", self.run.root.display(), s.step, s.epoch + 1, s.batch, self.n);
+                    }
+                }
+                None => {
+                    if self.opts.verbose {
+                        eprintln!("no checkpoint in {} yet: starting from step 0", self.run.root.display());
+                    }
+                }
+            }
+            truncate_after(&self.run.metrics_csv(), "step", self.state.step as f64)?;
+            truncate_after(&self.run.epochs_csv(), "epoch", self.state.epoch as f64)?;
+        }
+        self.saved_step = self.state.step;
+        Ok((model, optim))
+    }
+
+    fn announce(&self, params: usize) {
+        if self.opts.verbose {
+            let cfg = self.cfg;
+            eprintln!(
+                "{}: {} ({} parameters), {} train frames / {} val frames, {} steps per epoch, backend {:?}",
+                self.name,
+                cfg.model.kind(),
+                params,
+                self.loader.dataset().len(),
+                self.val_loader.dataset().len(),
+                self.n,
+                cfg.backend
+            );
+        }
+    }
+
+    /// Whether `--max-steps` is reached.
+    fn steps_exhausted(&self) -> bool {
+        self.opts.max_steps.is_some_and(|m| self.state.step >= m)
+    }
+
+    fn epoch_bar(&self) -> ProgressBar {
+        let pb = if self.opts.verbose { progress::bar(self.n as u64, &format!("epoch {}/{}", self.state.epoch + 1, self.epochs)) } else { ProgressBar::hidden() };
+        pb.set_position(self.state.batch as u64);
+        pb.reset_eta();
+        pb
+    }
+
+    /// One optimisation step on `batch`: the loss and its terms (refusing non-finite ones before
+    /// anything is written), backward, Adam at the scheduled rate, the step's CSV row, and the
+    /// mid-epoch checkpoint when `train.checkpoint_every` says so.
+    fn step<D: Detector>(&mut self, model: D, optim: &mut ModuleOptimizer, batch: &Batch, ad: &Device, pb: &ProgressBar) -> Result<D> {
+        let (n, state) = (self.n, &mut self.state);
+        let t0 = Instant::now();
+        let e = state.epoch as f64 + state.batch as f64 / n as f64;
+        let lr = self.cfg.train.schedule.lr(e, self.epochs);
+        let terms = model.loss(batch, ad);
+        let names = term_names(&terms);
+        let loss = terms.total.clone().into_scalar::<f32>() as f64;
+        let values: Vec<f64> = terms.terms.iter().map(|(_, t)| t.clone().into_scalar::<f32>() as f64).collect();
+        if !loss.is_finite() || values.iter().any(|v| !v.is_finite()) {
+            pb.finish_and_clear();
+            let parts: Vec<String> = names.iter().zip(&values).map(|(n, v)| format!("{n} {v}")).collect();
+            bail!(
+                "non-finite loss at step {} (epoch {}, batch {}/{n}): loss {loss} ({}); stopped without writing a checkpoint, the last good one is kept in {}",
+                state.step + 1,
+                state.epoch + 1,
+                state.batch + 1,
+                parts.join(", "),
+                self.run.checkpoints().display()
+            );
+        }
+        let grads = GradientsParams::from_grads(terms.total.backward(), &model);
+        let model = optim.step(lr, model, grads);
+        let secs = t0.elapsed().as_secs_f64();
+        state.step += 1;
+        state.batch += 1;
+        state.time += secs;
+        state.epoch_seconds += secs;
+        accumulate(&mut state.epoch_sums, "loss", loss);
+        for (nm, v) in names.iter().zip(&values) {
+            accumulate(&mut state.epoch_sums, nm, *v);
+        }
+        let log = match &mut self.step_log {
+            Some(l) => l,
+            None => self.step_log.insert(CsvLog::open(&self.run.metrics_csv(), &step_header(&names))?),
+        };
+        let mut row = vec![state.step.to_string(), field(Some(e)), field(Some(lr)), field(Some(loss))];
+        row.extend(values.iter().map(|v| field(Some(*v))));
+        row.extend([field(Some(secs)), field(Some(state.time))]);
+        log.append(&row)?;
+        if self.epoch_log.is_none() {
+            self.epoch_log = Some(CsvLog::open(&self.run.epochs_csv(), &epoch_header(&names))?);
+        }
+        pb.set_message(format!("loss {loss:.4} lr {lr:.2e}"));
+        pb.inc(1);
+        let every = self.cfg.train.checkpoint_every;
+        if every > 0 && self.state.step % every == 0 && self.state.batch < n {
+            self.ckpts.save(&model, optim, &self.state, &[Slot::Latest])?;
+            self.saved_step = self.state.step;
+        }
+        Ok(model)
+    }
+
+    /// The end of an epoch: validation when due, the epoch's CSV row and line, the latest (and,
+    /// on a better AP3D@0.3, the best) checkpoint, the plots.
+    fn end_epoch<D: Detector>(&mut self, model: &D, optim: &ModuleOptimizer, device: &Device) -> Result<()> {
+        let (cfg, epochs) = (self.cfg, self.epochs);
+        let done = self.state.epoch + 1;
+        let due = (cfg.train.val_every > 0 && done.is_multiple_of(cfg.train.val_every)) || done == epochs || done == self.stop_epochs;
+        let val = if due { Some(validate(&model.valid(), &self.val_loader, device, &cfg.eval.protocol(), self.opts.verbose)?) } else { None };
+        let state = &mut self.state;
         let steps_in_epoch = state.batch.max(1) as f64;
-        let mean = |k: &str| state.epoch_sums.iter().find(|(n, _)| n == k).map(|(_, s)| s / steps_in_epoch);
-        let names: Vec<String> = state.epoch_sums.iter().map(|(n, _)| n.clone()).filter(|n| n != "loss").collect();
+        let sums = state.epoch_sums.clone();
+        let mean = |k: &str| sums.iter().find(|(n, _)| n == k).map(|(_, s)| s / steps_in_epoch);
+        let names: Vec<String> = sums.iter().map(|(n, _)| n.clone()).filter(|n| n != "loss").collect();
         let lr_end = cfg.train.schedule.lr(done as f64, epochs);
         let mut row = vec![done.to_string(), state.step.to_string(), field(Some(lr_end)), field(mean("loss"))];
         row.extend(names.iter().map(|n| field(mean(n))));
         let ap = val.as_ref().map(|v| v.ap3d);
         row.extend((0..3).map(|i| field(ap.map(|a| a[i]))));
         row.extend([field(Some(state.epoch_seconds)), field(val.as_ref().map(|v| v.seconds)), field(Some(state.time))]);
-        let elog = match &mut epoch_log {
+        let elog = match &mut self.epoch_log {
             Some(l) => l,
-            None => epoch_log.insert(CsvLog::open(&run.epochs_csv(), &epoch_header(&names))?),
+            None => self.epoch_log.insert(CsvLog::open(&self.run.epochs_csv(), &epoch_header(&names))?),
         };
         elog.append(&row)?;
-        if opts.verbose {
+        if self.opts.verbose {
             let parts: Vec<String> = names.iter().map(|n| format!("{n} {:.4}", mean(n).unwrap_or(f64::NAN))).collect();
             let ap_text = ap.map_or_else(String::new, |a| format!("  AP3D@0.3/0.5/0.7 {:.1}/{:.1}/{:.1}", 100.0 * a[0], 100.0 * a[1], 100.0 * a[2]));
             eprintln!("epoch {done}/{epochs}  loss {:.4} ({})  lr {lr_end:.2e}{ap_text}  {:.0} s", mean("loss").unwrap_or(f64::NAN), parts.join(", "), state.epoch_seconds);
@@ -245,8 +337,8 @@ pub fn train_model<D: Detector>(mut model: D, cfg: &RunConfig, run: &RunDir, opt
             }
         }
         if let Some(v) = &val {
-            last_by_range = Some(v.ap3d_by_range);
-            last_heading = v.heading;
+            self.last_by_range = Some(v.ap3d_by_range);
+            self.last_heading = v.heading;
         }
         state.epoch = done;
         state.batch = 0;
@@ -260,31 +352,38 @@ pub fn train_model<D: Detector>(mut model: D, cfg: &RunConfig, run: &RunDir, opt
                 slots.push(Slot::Best);
             }
         }
-        ckpts.save(&model, &optim, &state, &slots)?;
-        saved_step = state.step;
-        if let Err(e) = plots::plot_run(run) {
+        self.ckpts.save(model, optim, &self.state, &slots)?;
+        self.saved_step = self.state.step;
+        if let Err(e) = plots::plot_run(self.run) {
             eprintln!("warning: plots not drawn: {e:#}");
         }
+        Ok(())
     }
-    if state.step != saved_step || ckpts.get(Slot::Latest)?.is_none() {
-        ckpts.save(&model, &optim, &state, &[Slot::Latest])?;
+
+    /// The end of the invocation: a last checkpoint if steps were taken since one, and
+    /// `summary.json`.
+    fn finish<D: Detector>(self, model: &D, optim: &ModuleOptimizer, params: usize) -> Result<TrainSummary> {
+        let state = &self.state;
+        if state.step != self.saved_step || self.ckpts.get(Slot::Latest)?.is_none() {
+            self.ckpts.save(model, optim, state, &[Slot::Latest])?;
+        }
+        let summary = TrainSummary {
+            name: self.name.clone(),
+            model: self.cfg.model.kind().to_string(),
+            params,
+            steps: state.step,
+            epochs: state.epoch,
+            finished: state.epoch >= self.epochs,
+            last_ap3d: state.last_val.map(|(a, _)| a),
+            last_epoch: state.last_val.map(|(_, e)| e),
+            best_ap3d_03: state.best,
+            train_seconds: state.time,
+            last_ap3d_by_range: self.last_by_range,
+            last_heading: self.last_heading,
+        };
+        write_atomic(&self.run.summary_json(), serde_json::to_string_pretty(&summary)?.as_bytes()).context("writing summary.json")?;
+        Ok(summary)
     }
-    let summary = TrainSummary {
-        name,
-        model: cfg.model.kind().to_string(),
-        params,
-        steps: state.step,
-        epochs: state.epoch,
-        finished: state.epoch >= epochs,
-        last_ap3d: state.last_val.map(|(a, _)| a),
-        last_epoch: state.last_val.map(|(_, e)| e),
-        best_ap3d_03: state.best,
-        train_seconds: state.time,
-        last_ap3d_by_range: last_by_range,
-        last_heading,
-    };
-    write_atomic(&run.summary_json(), serde_json::to_string_pretty(&summary)?.as_bytes()).context("writing summary.json")?;
-    Ok(summary)
 }
 
 fn accumulate(sums: &mut Vec<(String, f64)>, key: &str, v: f64) {

@@ -44,8 +44,8 @@ impl Pillars {
         let mut members: Vec<Vec<usize>> = Vec::new();
         let mut cell = Vec::new();
         for s in 0..batch.len() {
-            for row in batch.offsets[s]..batch.offsets[s + 1] {
-                let p = [0, 1, 2].map(|k| batch.features[3 * row + k] as f64);
+            for row in batch.rows(s) {
+                let p = batch.point(row).map(f64::from);
                 let Some([ix, iy, iz]) = grid.pillar_of(p) else { continue };
                 let flat = (((s * nz + iz) * nx + ix) * ny + iy) as i64;
                 let id = *index.entry(flat).or_insert_with(|| {
@@ -63,7 +63,7 @@ impl Pillars {
         let mut out = Pillars { k, cell, batch: batch.len(), ..Default::default() };
         out.points.reserve(n * POINT_FEATURES);
         for (id, rows) in members.iter().enumerate() {
-            let xyz: Vec<[f64; 3]> = rows.iter().map(|&r| [0, 1, 2].map(|k| batch.features[3 * r + k] as f64)).collect();
+            let xyz: Vec<[f64; 3]> = rows.iter().map(|&r| batch.point(r).map(f64::from)).collect();
             let mean = [0, 1, 2].map(|k| xyz.iter().map(|p| p[k]).sum::<f64>() / xyz.len() as f64);
             let p0 = xyz[0];
             let [ix, iy, _] = grid.pillar_of(p0).expect("members lie in the grid");

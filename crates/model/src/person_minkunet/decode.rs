@@ -21,13 +21,13 @@ pub fn decode(out: &[f32], batch: &Batch, coder: &BoxCoder, post: &PostProcessCo
     (0..batch.len())
         .map(|s| {
             let (mut boxes, mut scores): (Vec<Box3d>, Vec<f32>) = (Vec::new(), Vec::new());
-            for row in batch.offsets[s]..batch.offsets[s + 1] {
+            for row in batch.rows(s) {
                 let values = &out[row * c..(row + 1) * c];
                 let score = sigmoid(values[CLS]);
                 if (score as f64) <= post.score_threshold {
                     continue;
                 }
-                let v = [0, 1, 2].map(|k| batch.centres[3 * row + k] as f64);
+                let v = batch.centre(row).map(f64::from);
                 boxes.push(coder.decode_row(values, v));
                 scores.push(score);
             }

@@ -48,9 +48,9 @@ pub fn assign(batch: &Batch, coder: &BoxCoder, epsilon: f64, variant: TargetVari
         if boxes.is_empty() {
             continue;
         }
-        for row in batch.offsets[s]..batch.offsets[s + 1] {
-            let p: [f64; 3] = [0, 1, 2].map(|k| batch.features[3 * row + k] as f64);
-            let v: [f64; 3] = [0, 1, 2].map(|k| batch.centres[3 * row + k] as f64);
+        for row in batch.rows(s) {
+            let p: [f64; 3] = batch.point(row).map(f64::from);
+            let v: [f64; 3] = batch.centre(row).map(f64::from);
             let nearest = boxes
                 .iter()
                 .min_by(|a, b| centre_dist2(p, a).total_cmp(&centre_dist2(p, b)))

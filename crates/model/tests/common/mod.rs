@@ -63,7 +63,7 @@ pub fn ap03(batch: &Batch, dets: &[Detections]) -> f64 {
         .map(|i| (i, i % batch.len()))
         .map(|(i, s)| (format!("{i:06}"), s))
         .map(|(name, s)| {
-            let pts: Vec<[f32; 3]> = batch.features[3 * batch.offsets[s]..3 * batch.offsets[s + 1]].chunks(3).map(|c| [c[0], c[1], c[2]]).collect();
+            let pts: Vec<[f32; 3]> = batch.points(s);
             Frame {
                 sequence: "seq".into(),
                 name,
@@ -79,7 +79,7 @@ pub fn ap03(batch: &Batch, dets: &[Detections]) -> f64 {
 pub fn valid_gt(batch: &Batch) -> usize {
     (0..batch.len())
         .map(|s| {
-            let pts: Vec<[f32; 3]> = batch.features[3 * batch.offsets[s]..3 * batch.offsets[s + 1]].chunks(3).map(|c| [c[0], c[1], c[2]]).collect();
+            let pts: Vec<[f32; 3]> = batch.points(s);
             batch.boxes[s].iter().filter(|b| b.count_inside(&pts) >= 10).count()
         })
         .sum()
