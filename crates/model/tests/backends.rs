@@ -3,12 +3,9 @@
 
 mod common;
 
-use std::sync::OnceLock;
-
 use common::sim_batch;
 use model::{CenterPointConfig, Detector, PersonMinkUNetConfig};
 use sparse_conv::burn::tensor::Device;
-use sparse_conv::burn::tensor::wgpu::WgpuBackend;
 
 fn other_devices() -> Vec<(&'static str, Device)> {
     #[allow(deprecated)]
@@ -21,18 +18,10 @@ fn other_devices() -> Vec<(&'static str, Device)> {
     d
 }
 
-/// The wgpu device, initialised once per test binary: a second `init` on the same device fails
-/// ("Service already initialized"), and the tests run in parallel.
+/// The wgpu device on the platform's native API (never OpenGL, where the op's kernels hang),
+/// initialised once per process by `sparse_conv::wgpu_device`.
 fn wgpu_device() -> Device {
-    static DEVICE: OnceLock<Device> = OnceLock::new();
-    DEVICE
-        .get_or_init(|| {
-            // Pinned to the platform's native API: `Device::wgpu` would settle on OpenGL where no
-            // Vulkan driver exists, and the op's kernels hang there.
-            let api = if cfg!(target_os = "macos") { WgpuBackend::Metal } else { WgpuBackend::Vulkan };
-            Device::wgpu_options().graphics_api(api).init().unwrap_or_else(|e| panic!("PMUNET_TEST_WGPU=1 but no {api:?} adapter: {e}"))
-        })
-        .clone()
+    sparse_conv::wgpu_device().unwrap_or_else(|e| panic!("PMUNET_TEST_WGPU=1 but {e}"))
 }
 
 fn assert_close(a: &[f32], b: &[f32], what: &str) {

@@ -20,6 +20,7 @@
 //! - [`scene`]: voxel scenes for benchmarks (a synthetic LiDAR-like scene, `.npy` files).
 //! - [`heap`]: the binaries' malloc policy (freed tensor memory stays in the process).
 //! - [`timing`]: medians and peak memory for the benchmark binaries.
+//! - [`wgpu_device`]: the wgpu device on the platform's native graphics API (never OpenGL).
 
 pub mod adam;
 #[cfg(target_arch = "x86_64")]
@@ -41,6 +42,7 @@ mod row_tiles;
 pub mod scene;
 pub mod tensor;
 pub mod timing;
+pub mod wgpu_device;
 
 pub use backend::SparseConvBackend;
 pub use adam::{AdamBackend, FusedAdam, FusedAdamConfig};
@@ -52,5 +54,6 @@ pub use kernel_map::{KernelMap, MapKind, NeighborTable};
 pub use op::sparse_conv;
 pub use output_grad::{OutputGradBackend, backward_from};
 pub use tensor::{MapCache, SparseTensor};
+pub use wgpu_device::wgpu_device;
 
 pub use burn;

@@ -2,7 +2,7 @@
 //! and the CPU thread count.
 
 use anyhow::{Result, anyhow};
-use burn::tensor::{Device, DeviceKind};
+use burn::tensor::Device;
 use serde::{Deserialize, Serialize};
 
 /// Which Burn backend runs the numerics.
@@ -14,19 +14,21 @@ pub enum BackendKind {
     Flex,
     /// The ndarray CPU backend (deprecated by Burn 0.22, kept for comparison).
     Ndarray,
-    /// wgpu on the default adapter (a GPU, or Mesa's lavapipe on a CPU).
+    /// wgpu on the default adapter of the platform's native graphics API (Vulkan, Metal, DX12): a
+    /// GPU, or Mesa's lavapipe on a CPU. Never OpenGL, where the op's kernels hang.
     Wgpu,
 }
 
 impl BackendKind {
-    /// The plain (non-autodiff) device; `.autodiff()` of it trains.
+    /// The plain (non-autodiff) device; `.autodiff()` of it trains. wgpu without an adapter on a
+    /// native API is an error that says what to install.
     #[allow(deprecated)]
-    pub fn device(self) -> Device {
-        match self {
+    pub fn device(self) -> Result<Device> {
+        Ok(match self {
             BackendKind::Flex => Device::flex(),
             BackendKind::Ndarray => Device::ndarray(),
-            BackendKind::Wgpu => Device::wgpu(DeviceKind::DefaultDevice),
-        }
+            BackendKind::Wgpu => sparse_conv::wgpu_device().map_err(|e| anyhow!("--backend wgpu: {e}"))?,
+        })
     }
 
     /// The name `BURN_DEVICE` knows it by.

@@ -90,7 +90,7 @@ pub fn infer(run: &RunDir, opts: &InferOptions) -> Result<InferOutput> {
     init_threads(cfg.threads)?;
     let slot = opts.checkpoint.unwrap_or(Slot::Latest);
     let files = Checkpoints::new(run.checkpoints()).get(slot)?.with_context(|| format!("{} has no {slot:?} checkpoint", run.root.display()))?;
-    let device = cfg.backend.device();
+    let device = cfg.backend.device()?;
     match &cfg.model {
         ModelConfig::PersonMinkunet(c) => infer_model(c.init(&device), &files, run, &cfg, opts, &device),
         ModelConfig::Centerpoint(c) => infer_model(c.init(&device), &files, run, &cfg, opts, &device),

@@ -89,7 +89,7 @@ pub fn optimizer(cfg: &OptimizerConfig) -> ModuleOptimizer {
 /// Trains the run's model (dispatching once on `model.kind`) in `run`.
 pub fn train(cfg: &RunConfig, run: &RunDir, opts: &TrainOptions) -> Result<TrainSummary> {
     init_threads(cfg.threads)?;
-    let device = cfg.backend.device();
+    let device = cfg.backend.device()?;
     // The same seed gives the same initial weights.
     device.seed(cfg.seed);
     let ad = device.clone().autodiff();

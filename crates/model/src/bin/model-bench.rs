@@ -9,7 +9,7 @@ use anyhow::Context;
 use clap::{Parser, ValueEnum};
 use model::bench::{KernelTimes, Parts, bench_batch, run};
 use model::{CenterPointConfig, ModelConfig, PersonMinkUNetConfig};
-use sparse_conv::burn::tensor::{Device, DeviceKind};
+use sparse_conv::burn::tensor::Device;
 use sparse_conv::scene;
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -82,7 +82,7 @@ fn main() -> anyhow::Result<()> {
         Backend::Flex => (Device::flex(), "flex"),
         #[allow(deprecated)]
         Backend::Ndarray => (Device::ndarray(), "ndarray"),
-        Backend::Wgpu => (Device::wgpu(DeviceKind::DefaultDevice), "wgpu"),
+        Backend::Wgpu => (sparse_conv::wgpu_device().map_err(anyhow::Error::msg)?, "wgpu"),
     };
     let parts = match args.only {
         None => Parts::Both,

@@ -8,7 +8,7 @@ use std::sync::Arc;
 use anyhow::Context;
 use clap::{Parser, ValueEnum};
 use serde::Serialize;
-use sparse_conv::burn::tensor::{Device, DeviceKind, Distribution, Tensor};
+use sparse_conv::burn::tensor::{Device, Distribution, Tensor};
 use sparse_conv::timing::{self, Timing, median_ms, peak_rss_mb, time_ms};
 use sparse_conv::cpu::{self, PairDirection};
 use sparse_conv::{CoordIndex, KernelMap, backward_from, scene, sparse_conv};
@@ -192,7 +192,7 @@ fn measure(args: &Args, scene_coords: &[sparse_conv::Coord]) -> anyhow::Result<R
         Backend::Flex => Device::flex(),
         #[allow(deprecated)]
         Backend::Ndarray => Device::ndarray(),
-        Backend::Wgpu => Device::wgpu(DeviceKind::DefaultDevice),
+        Backend::Wgpu => sparse_conv::wgpu_device().map_err(anyhow::Error::msg)?,
     };
 
     let map_ms = median_ms(args.warmup, args.runs, || {

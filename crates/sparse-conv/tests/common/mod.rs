@@ -11,7 +11,6 @@ use rand_chacha::ChaCha8Rng;
 use sparse_conv::{Coord, CoordIndex, KernelMap, sparse_conv};
 use sparse_conv::burn::tensor::module::{conv_transpose3d, conv3d};
 use sparse_conv::burn::tensor::ops::{ConvOptions, ConvTransposeOptions};
-use sparse_conv::burn::tensor::wgpu::WgpuBackend;
 use sparse_conv::burn::tensor::{DType, Device, Tensor, TensorData};
 
 pub fn rng(seed: u64) -> ChaCha8Rng {
@@ -168,19 +167,6 @@ pub fn assert_maps_close(actual: &BTreeMap<Coord, Vec<f64>>, expected: &BTreeMap
 const PROBE_LIMIT: Duration = Duration::from_secs(120);
 const BINARY_LIMIT: Duration = Duration::from_secs(25 * 60);
 
-/// The graphics APIs the op's CubeCL kernels are tested on. OpenGL is left out: on Mesa's GL
-/// (llvmpipe through EGL) the kernels wait on a futex for ever, and `Device::wgpu`'s automatic
-/// choice picks GL on a machine without a Vulkan driver.
-fn native_apis() -> Vec<WgpuBackend> {
-    if cfg!(target_os = "macos") {
-        vec![WgpuBackend::Metal]
-    } else if cfg!(target_os = "windows") {
-        vec![WgpuBackend::Dx12, WgpuBackend::Vulkan]
-    } else {
-        vec![WgpuBackend::Vulkan]
-    }
-}
-
 /// The wgpu device, once per test binary, when an adapter on a native API runs the op correctly
 /// within [`PROBE_LIMIT`]; `None` otherwise (the test then skips, saying why), unless
 /// `PMUNET_REQUIRE_WGPU=1`, which CI sets after installing the software Vulkan driver: then a
@@ -203,31 +189,20 @@ fn probe_wgpu() -> Option<Device> {
     let (tx, rx) = mpsc::channel();
     // The probe runs on its own thread: a driver that never answers leaves it blocked, not us.
     std::thread::spawn(move || {
-        let mut failures = Vec::new();
-        for api in native_apis() {
-            let attempt = std::panic::catch_unwind(|| -> Result<Device, String> {
-                let device = Device::wgpu_options().graphics_api(api).init().map_err(|e| e.to_string())?;
-                let coords = vec![[0, 0, 0, 0], [0, 1, 0, 0]];
-                let index = sparse_conv::CoordIndex::build(&coords).unwrap();
-                let map = Arc::new(sparse_conv::KernelMap::submanifold(&coords, &index, 3, 1));
-                let x = Tensor::<2>::ones([2, 1], &device);
-                let w = Tensor::<3>::ones([27, 1, 1], &device);
-                let out = values(sparse_conv(x, w, &map));
-                if out != vec![2.0, 2.0] {
-                    return Err(format!("a 2-voxel convolution gave {out:?} instead of [2.0, 2.0]"));
-                }
-                Ok(device)
-            });
-            match attempt {
-                Ok(Ok(device)) => {
-                    let _ = tx.send(Ok(device));
-                    return;
-                }
-                Ok(Err(e)) => failures.push(format!("{api:?}: {e}")),
-                Err(_) => failures.push(format!("{api:?}: panicked")),
+        let attempt = std::panic::catch_unwind(|| -> Result<Device, String> {
+            let device = sparse_conv::wgpu_device()?;
+            let coords = vec![[0, 0, 0, 0], [0, 1, 0, 0]];
+            let index = sparse_conv::CoordIndex::build(&coords).unwrap();
+            let map = Arc::new(sparse_conv::KernelMap::submanifold(&coords, &index, 3, 1));
+            let x = Tensor::<2>::ones([2, 1], &device);
+            let w = Tensor::<3>::ones([27, 1, 1], &device);
+            let out = values(sparse_conv(x, w, &map));
+            if out != vec![2.0, 2.0] {
+                return Err(format!("a 2-voxel convolution gave {out:?} instead of [2.0, 2.0]"));
             }
-        }
-        let _ = tx.send(Err(failures.join("; ")));
+            Ok(device)
+        });
+        let _ = tx.send(attempt.unwrap_or_else(|_| Err("the probe panicked".to_string())));
     });
     match rx.recv_timeout(PROBE_LIMIT) {
         Ok(Ok(device)) => {
@@ -242,7 +217,7 @@ fn probe_wgpu() -> Option<Device> {
             });
             Some(device)
         }
-        Ok(Err(why)) => skip(format!("no adapter on {:?} runs the sparse conv ({why})", native_apis())),
+        Ok(Err(why)) => skip(format!("no adapter runs the sparse conv: {why}")),
         Err(_) => skip(format!("the wgpu probe did not finish within {} s", PROBE_LIMIT.as_secs())),
     }
 }
