@@ -150,6 +150,9 @@ fn run_train(a: TrainArgs) -> Result<()> {
     } else {
         Existing::Refuse
     };
+    // A backend that cannot start fails before the run folder exists (a folder left behind
+    // would make the next attempt ask for --resume or --overwrite).
+    cfg.backend.device()?;
     let run = RunDir::create(&dir, &cfg, existing)?;
     let opts = TrainOptions { resume: a.resume, max_steps: a.max_steps, max_epochs: a.max_epochs, verbose: !a.quiet };
     let s = train::train(&cfg, &run, &opts)?;
@@ -211,6 +214,7 @@ fn main() -> ExitCode {
                 &jobs,
                 |job| {
                     let existing = if job.dir.join("config.toml").exists() { Existing::Resume } else { Existing::Refuse };
+                    job.config.backend.device()?;
                     let run = RunDir::create(&job.dir, &job.config, existing)?;
                     let opts = TrainOptions { resume: existing == Existing::Resume, max_steps, max_epochs, verbose: true };
                     train::train(&job.config, &run, &opts)
