@@ -25,7 +25,6 @@
 //! last bits: its products sum their terms in another order).
 
 use std::arch::x86_64::*;
-use std::sync::OnceLock;
 
 use rayon::prelude::*;
 
@@ -41,11 +40,10 @@ const MR: usize = 12;
 /// Pairs per block: their rows stay in L1 while every tile of the partial passes over them.
 const PAIR_BLOCK: usize = 32;
 
-/// Whether this kernel runs: the CPU has AVX-512F and `PMUNET_AVX512` is not `0` (which
-/// selects the general path, for comparisons).
+/// Whether these kernels run: the CPU has AVX-512F and [`KernelOptions`](crate::KernelOptions)
+/// does not ask for the general path.
 pub fn available() -> bool {
-    static AVAILABLE: OnceLock<bool> = OnceLock::new();
-    *AVAILABLE.get_or_init(|| std::arch::is_x86_feature_detected!("avx512f") && std::env::var("PMUNET_AVX512").map_or(true, |v| v != "0"))
+    crate::KernelOptions::current().cpu == crate::CpuKernels::Auto && std::arch::is_x86_feature_detected!("avx512f")
 }
 
 /// The float at `p` in every lane. (Through a load intrinsic rather than `*p`, and with

@@ -310,7 +310,7 @@ pub(crate) struct SyncPtr<T>(pub(crate) *mut T);
 unsafe impl<T> Send for SyncPtr<T> {}
 unsafe impl<T> Sync for SyncPtr<T> {}
 
-/// Runs `f` compiled for AVX-512 where the CPU has it (and `PMUNET_AVX512` is not `0`). Plain
+/// Runs `f` compiled for AVX-512 where the CPU has it (and `KernelOptions` allows it). Plain
 /// loops over channels or elements are vectorized for the features of the function they land
 /// in, so only if LLVM inlines `f` into it: a small closure calling an `#[inline(always)]`
 /// function is (Adam's chunks, the ReLU gradient); the batch-norm passes' row closures were not,

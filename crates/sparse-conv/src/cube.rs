@@ -5,7 +5,7 @@
 //!   cube owns a tile of rows (sorted by the offsets they use, [`RowTiles`]) and of output
 //!   channels, stages its rows' partners and each used offset's weight in shared memory, and each
 //!   unit sums its rows' partners in offset order. A launch of fewer tiles than
-//!   `PMUNET_GPU_TILED_MIN_CUBES` (default 2048) runs the same sums untiled, one unit per few rows,
+//!   `KernelOptions::gpu_tiled_min_cubes` (default 2048) runs the same sums untiled, one unit per few rows,
 //!   without the tile plan's host work. No
 //!   atomics (the software Vulkan driver has no f32 atomics), and results do not depend on
 //!   scheduling;
@@ -41,22 +41,13 @@ use crate::timing::{Kernel, in_kernel};
 /// Rows of a gather tile.
 const TILE_ROWS: usize = 64;
 
-/// Fewest cubes the tiled gather takes on by default; a smaller layer runs
-/// [`direct_gather_kernel`]. The tiled kernel needs the rows' tile plan ([`RowTiles`], made on the
-/// host once per map and side); on an H100 its faster kernel repaid that only past a few
-/// thousand tiles, a U-Net on the JRDB-like scene (35,450 voxels, ≤ 1,108 tiles) being below.
-const TILED_MIN_CUBES: usize = 2048;
-
-/// [`TILED_MIN_CUBES`], or `PMUNET_GPU_TILED_MIN_CUBES` where set (read once; 0 = always tiled).
+/// Fewest cubes the tiled gather takes on ([`KernelOptions::gpu_tiled_min_cubes`]); a smaller
+/// layer runs [`direct_gather_kernel`]. The tiled kernel needs the rows' tile plan ([`RowTiles`],
+/// made on the host once per map and side), which only a large enough launch repays.
+///
+/// [`KernelOptions::gpu_tiled_min_cubes`]: crate::KernelOptions::gpu_tiled_min_cubes
 fn tiled_min_cubes() -> usize {
-    static MIN: OnceLock<usize> = OnceLock::new();
-    *MIN.get_or_init(|| match std::env::var("PMUNET_GPU_TILED_MIN_CUBES") {
-        Ok(v) => v.trim().parse().unwrap_or_else(|_| {
-            eprintln!("warning: PMUNET_GPU_TILED_MIN_CUBES={v:?} is not a whole number; using {TILED_MIN_CUBES}");
-            TILED_MIN_CUBES
-        }),
-        Err(_) => TILED_MIN_CUBES,
-    })
+    crate::KernelOptions::current().gpu_tiled_min_cubes
 }
 
 /// Rows one unit of the direct gather computes.

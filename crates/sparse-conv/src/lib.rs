@@ -14,6 +14,7 @@
 //! - [`conv_norm`]: a conv and the batch norm after it at inference (fixed statistics, with
 //!   its ReLU or a residual) as one op.
 //! - [`op`]: [`sparse_conv`] on Burn tensors.
+//! - [`options`]: [`KernelOptions`], the kernels' knobs, set by the application.
 //! - [`output_grad`]: a backward pass from a given output gradient ([`backward_from`]).
 //! - [`tensor`]: [`SparseTensor`], features with coordinates and a shared map cache.
 //! - [`modules`]: convolutions, batch norm, linear and U-Net blocks.
@@ -37,6 +38,7 @@ pub mod heap;
 pub mod kernel_map;
 pub mod modules;
 pub mod op;
+pub mod options;
 pub mod output_grad;
 mod row_tiles;
 pub mod scene;
@@ -52,6 +54,7 @@ pub use conv_norm::{ConvNormBackend, sparse_conv_norm_eval};
 pub use coords::{Coord, CoordError, CoordIndex};
 pub use kernel_map::{KernelMap, MapKind, NeighborTable};
 pub use op::sparse_conv;
+pub use options::{CpuKernels, KernelOptions};
 pub use output_grad::{OutputGradBackend, backward_from};
 pub use tensor::{MapCache, SparseTensor};
 pub use wgpu_device::wgpu_device;

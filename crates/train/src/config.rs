@@ -17,6 +17,7 @@
 //! [train]                      # epochs, batch size, Adam, schedule, validation cadence
 //! [train.schedule]             # kind = "exp_decay" (spec §1.11) | "constant" | "cosine"
 //! [eval]                       # protocol (range, min points), val batching (NMS: [model.post])
+//! [kernels]                    # the op's kernel knobs: cpu = "auto" | "generic", gpu_tiled_min_cubes
 //! ```
 
 use std::path::{Path, PathBuf};
@@ -59,6 +60,10 @@ pub struct RunConfig {
     /// Validation and evaluation.
     #[serde(default)]
     pub eval: EvalConfig,
+    /// The sparse convolution's kernel knobs (`cpu = "auto" | "generic"`,
+    /// `gpu_tiled_min_cubes`); the defaults are the fast ones.
+    #[serde(default)]
+    pub kernels: sparse_conv::KernelOptions,
 }
 
 fn default_out_dir() -> PathBuf {

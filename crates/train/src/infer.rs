@@ -88,6 +88,7 @@ pub fn infer(run: &RunDir, opts: &InferOptions) -> Result<InferOutput> {
         cfg.backend = b;
     }
     init_threads(cfg.threads)?;
+    cfg.kernels.apply();
     let slot = opts.checkpoint.unwrap_or(Slot::Latest);
     let files = Checkpoints::new(run.checkpoints()).get(slot)?.with_context(|| format!("{} has no {slot:?} checkpoint", run.root.display()))?;
     let device = cfg.backend.device()?;

@@ -89,6 +89,7 @@ pub fn optimizer(cfg: &OptimizerConfig) -> ModuleOptimizer {
 /// Trains the run's model (dispatching once on `model.kind`) in `run`.
 pub fn train(cfg: &RunConfig, run: &RunDir, opts: &TrainOptions) -> Result<TrainSummary> {
     init_threads(cfg.threads)?;
+    cfg.kernels.apply();
     let device = cfg.backend.device()?;
     // The same seed gives the same initial weights.
     device.seed(cfg.seed);

@@ -35,6 +35,9 @@ enum Only {
 #[derive(Parser, Debug)]
 #[command(about = "Forward, training-step and memory benchmark of pmunet's detectors")]
 struct Args {
+    /// The op's kernel knobs.
+    #[command(flatten)]
+    kernels: sparse_conv::KernelOptions,
     /// Which detector (paper defaults).
     #[arg(long, value_enum, default_value_t = Kind::PersonMinkunet)]
     model: Kind,
@@ -70,6 +73,7 @@ struct Args {
 fn main() -> anyhow::Result<()> {
     sparse_conv::heap::retain_freed_memory();
     let args = Args::parse();
+    args.kernels.apply();
     anyhow::ensure!(args.batch >= 1 && args.runs >= 1, "--batch and --runs must be at least 1");
     rayon::ThreadPoolBuilder::new().num_threads(args.threads).build_global().context("configuring the thread pool")?;
     let coords = args.coords.as_ref().map(|p| scene::read_npy_coords(p)).transpose()?;

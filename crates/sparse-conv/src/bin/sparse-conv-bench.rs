@@ -24,6 +24,9 @@ enum Backend {
 #[derive(Parser, Debug)]
 #[command(about = "Benchmark of pmunet's sparse convolution on a voxel scene (medians, with minima)")]
 struct Args {
+    /// The op's kernel knobs.
+    #[command(flatten)]
+    kernels: sparse_conv::KernelOptions,
     /// Voxel coordinates, int32/int64 .npy, N×4 (batch, x, y, z) or N×3; default: built-in scene.
     #[arg(long)]
     coords: Option<PathBuf>,
@@ -158,6 +161,7 @@ fn main() -> anyhow::Result<()> {
     // SAFETY: no other thread exists yet.
     unsafe { std::env::set_var("MATMUL_NUM_THREADS", "1") };
     let args = Args::parse();
+    args.kernels.apply();
     anyhow::ensure!(args.kernel % 2 == 1, "--kernel must be odd, got {}", args.kernel);
     anyhow::ensure!(args.runs >= 1, "--runs must be at least 1");
     anyhow::ensure!(args.scale.iter().all(|&s| s >= 1), "--scale must be at least 1");

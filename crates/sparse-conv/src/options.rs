@@ -1,0 +1,63 @@
+//! The op's kernel knobs: which CPU kernels run and when the GPU gather is tiled. The library
+//! never reads the environment; an application sets these once, before its first convolution
+//! (the runner from its config's `[kernels]` table, the benchmark binaries from their flags).
+
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+
+use serde::{Deserialize, Serialize};
+
+/// Which CPU kernels the op runs in f32.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "snake_case")]
+pub enum CpuKernels {
+    /// The SIMD micro-kernels where the CPU has the instructions (AVX-512F), the general
+    /// gather–GEMM–scatter path elsewhere.
+    #[default]
+    Auto,
+    /// The general path on every CPU (to compare the two; f64 always runs it).
+    Generic,
+}
+
+/// Every knob of the op's kernels; the defaults are what the benchmarks chose. It is a TOML table
+/// (`[kernels]` of a run's config) and a set of command-line flags (`--cpu-kernels`,
+/// `--gpu-tiled-min-cubes`) alike.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::Args)]
+#[serde(default, deny_unknown_fields)]
+pub struct KernelOptions {
+    /// CPU kernels: `auto` (SIMD micro-kernels where the CPU has them) or `generic`.
+    #[arg(long = "cpu-kernels", value_enum, default_value_t = CpuKernels::Auto)]
+    pub cpu: CpuKernels,
+    /// Fewest tiles (cubes) a GPU gather launch needs to run tiled (rows sorted by the offsets
+    /// they use, staged in shared memory); smaller launches run untiled, which needs no
+    /// host-side tile plan. 0: always tiled. The default, 2048, is where the tiled kernel repaid
+    /// its plan on an H100 (`crates/sparse-conv/README.md`).
+    #[arg(long, default_value_t = DEFAULT_TILED_MIN_CUBES)]
+    pub gpu_tiled_min_cubes: usize,
+}
+
+const DEFAULT_TILED_MIN_CUBES: usize = 2048;
+
+impl Default for KernelOptions {
+    fn default() -> Self {
+        Self { cpu: CpuKernels::Auto, gpu_tiled_min_cubes: DEFAULT_TILED_MIN_CUBES }
+    }
+}
+
+static GENERIC_CPU: AtomicBool = AtomicBool::new(false);
+static TILED_MIN_CUBES: AtomicUsize = AtomicUsize::new(DEFAULT_TILED_MIN_CUBES);
+
+impl KernelOptions {
+    /// Makes these the options of every later convolution in the process. Set them before the
+    /// first one: results are bit-identical at every thread count for a given choice, not across
+    /// choices.
+    pub fn apply(self) {
+        GENERIC_CPU.store(self.cpu == CpuKernels::Generic, Ordering::Relaxed);
+        TILED_MIN_CUBES.store(self.gpu_tiled_min_cubes, Ordering::Relaxed);
+    }
+
+    /// The options in effect.
+    pub fn current() -> Self {
+        let cpu = if GENERIC_CPU.load(Ordering::Relaxed) { CpuKernels::Generic } else { CpuKernels::Auto };
+        Self { cpu, gpu_tiled_min_cubes: TILED_MIN_CUBES.load(Ordering::Relaxed) }
+    }
+}

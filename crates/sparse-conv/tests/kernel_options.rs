@@ -1,0 +1,52 @@
+//! Both CPU kernel choices of `KernelOptions` give the f64 composition's outputs and gradients in
+//! f32, and the choice holds until changed. Its own test binary: the options are process-wide, and
+//! the thread-count tests elsewhere compare bits within one choice.
+
+mod common;
+
+use std::sync::Arc;
+
+use common::*;
+use sparse_conv::burn::tensor::{DType, Device};
+use sparse_conv::{CoordIndex, CpuKernels, KernelMap, KernelOptions};
+
+#[test]
+fn both_cpu_kernel_choices_match_the_f64_result() {
+    let mut r = rng(5);
+    let c = [24, 40];
+    let coords = random_coords(&mut r, 3_000, 2, 20, 1);
+    let index = CoordIndex::build(&coords).unwrap();
+    let map = Arc::new(KernelMap::submanifold(&coords, &index, 3, 1));
+    let x = random_values(&mut r, map.n_in() * c[0]);
+    let w = random_values(&mut r, map.volume() * c[0] * c[1]);
+    let g = random_values(&mut r, map.n_out() * c[1]);
+    // f64 runs the general path whatever the options say: the reference.
+    let reference = conv_outputs_as(&map, &x, &w, &g, c, DType::F64);
+    let mut outputs = Vec::new();
+    for cpu in [CpuKernels::Generic, CpuKernels::Auto] {
+        KernelOptions { cpu, ..Default::default() }.apply();
+        assert_eq!(KernelOptions::current().cpu, cpu);
+        let got = conv_outputs_as(&map, &x, &w, &g, c, DType::F32);
+        for (name, a, b) in [("output", &got.out, &reference.out), ("input gradient", &got.gx, &reference.gx), ("weight gradient", &got.gw, &reference.gw)] {
+            assert_close(a, b, 1e-5, &format!("{cpu:?} {name}"));
+        }
+        outputs.push([got.out, got.gx, got.gw].concat());
+    }
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx512f") {
+        // Two different kernels ran (their sums round differently), so the choice took effect.
+        assert!(outputs[0].iter().zip(&outputs[1]).any(|(a, b)| a.to_bits() != b.to_bits()), "generic and AVX-512 results (output and both gradients) are the same bits");
+    }
+    KernelOptions { gpu_tiled_min_cubes: 0, ..Default::default() }.apply();
+    assert_eq!(KernelOptions::current(), KernelOptions { cpu: CpuKernels::Auto, gpu_tiled_min_cubes: 0 });
+}
+
+/// `conv_outputs` on flex in `dtype`.
+fn conv_outputs_as(map: &Arc<KernelMap>, x: &[f64], w: &[f64], g: &[f64], c: [usize; 2], dtype: DType) -> ConvOutputs {
+    let ad = Device::flex().autodiff();
+    let xt = tensor2(x, [map.n_in(), c[0]], &ad, dtype).require_grad();
+    let wt = tensor3(w, [map.volume(), c[0], c[1]], &ad, dtype).require_grad();
+    let out = sparse_conv::sparse_conv(xt.clone(), wt.clone(), map);
+    let grads = (out.clone() * tensor2(g, [map.n_out(), c[1]], &ad, dtype)).sum().backward();
+    ConvOutputs { out: values(out), gx: values(xt.grad(&grads).unwrap()), gw: values(wt.grad(&grads).unwrap()) }
+}
