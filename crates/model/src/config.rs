@@ -43,6 +43,14 @@ impl ModelConfig {
             ModelConfig::Centerpoint(c) => &c.post,
         }
     }
+
+    /// The post-processing of either model, to change (it does not change what a model learns).
+    pub fn post_mut(&mut self) -> &mut PostProcessConfig {
+        match self {
+            ModelConfig::PersonMinkunet(c) => &mut c.post,
+            ModelConfig::Centerpoint(c) => &mut c.post,
+        }
+    }
 }
 
 #[cfg(test)]

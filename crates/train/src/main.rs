@@ -120,6 +120,10 @@ enum Cmd {
         /// Only print the runs the sweep would make.
         #[arg(long)]
         dry_run: bool,
+        /// Score the finished runs again with the sweep's current [model.post] and [eval]
+        /// settings (nothing is retrained; any other change is refused), then write the tables.
+        #[arg(long)]
+        rescore: bool,
     },
 }
 
@@ -192,7 +196,7 @@ fn main() -> ExitCode {
             println!("{} frames; detections and scores in {}", out.frames, out.dir.display());
             Ok(())
         })(),
-        Some(Cmd::Sweep { file, backend, max_steps, max_epochs, dry_run }) => (|| -> Result<()> {
+        Some(Cmd::Sweep { file, backend, max_steps, max_epochs, dry_run, rescore }) => (|| -> Result<()> {
             let (sweep, base) = SweepConfig::load(&file)?;
             let mut jobs = sweep.jobs(&base)?;
             if let Some(b) = backend {
@@ -207,6 +211,24 @@ fn main() -> ExitCode {
                 for j in &jobs {
                     println!("{} seed {} → {}", j.variant, j.seed, j.dir.display());
                 }
+                return Ok(());
+            }
+            if rescore {
+                for j in &jobs {
+                    if train::sweep::finished(&j.dir).is_none() {
+                        eprintln!("{} seed {}: not finished, not rescored", j.variant, j.seed);
+                        continue;
+                    }
+                    eprintln!("rescoring {} seed {} ({})", j.variant, j.seed, j.dir.display());
+                    let s = train::sweep::rescore(j, true)?;
+                    if let Some(a) = s.last_ap3d {
+                        eprintln!("  AP3D@0.3/0.5/0.7 {:.1}/{:.1}/{:.1}", 100.0 * a[0], 100.0 * a[1], 100.0 * a[2]);
+                    }
+                }
+                let results = train::sweep::aggregate(&jobs);
+                results.write(&sweep.dir())?;
+                println!("{}", results.to_markdown());
+                println!("results in {}", sweep.dir().display());
                 return Ok(());
             }
             let results = train::run_sweep(

@@ -29,7 +29,9 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, bail};
 use serde::{Deserialize, Serialize};
 
+use crate::checkpoint::Slot;
 use crate::config::{RunConfig, set_key};
+use crate::infer::{InferOptions, infer};
 use crate::metrics::Table;
 use crate::plots::{Scale, Series, plot_lines};
 use crate::run_dir::{RunDir, write_atomic};
@@ -175,6 +177,33 @@ pub fn finished(dir: &Path) -> Option<TrainSummary> {
     let text = std::fs::read_to_string(RunDir::at(dir).summary_json()).ok()?;
     let s: TrainSummary = serde_json::from_str(&text).ok()?;
     s.finished.then_some(s)
+}
+
+/// Scores a finished run again under `job`'s post-processing and evaluation settings, which may
+/// have changed since it trained (they do not change what it learned): its latest checkpoint on
+/// the validation split, as the end of training validates. Every other setting must be the one
+/// it trained with. The run's `config.toml` takes the new settings, its `summary.json` the new
+/// scores, its `detections/val/` the detections; the run's own training record is unchanged.
+pub fn rescore(job: &Job, verbose: bool) -> Result<TrainSummary> {
+    let run = RunDir::at(&job.dir);
+    let mut summary = finished(&job.dir).with_context(|| format!("{} is not a finished run", job.dir.display()))?;
+    let mut stored = run.config()?;
+    *stored.model.post_mut() = job.config.model.post().clone();
+    stored.eval = job.config.eval.clone();
+    if stored != job.config {
+        bail!(
+            "{}: only [model.post] and [eval] may differ from the settings the run trained with; retrain it instead",
+            job.dir.display()
+        );
+    }
+    write_atomic(&run.config_file(), job.config.to_toml()?.as_bytes())?;
+    let opts = InferOptions { split: job.config.data.val_split, checkpoint: Some(Slot::Latest), render: 0, backend: None, verbose, data_root: None, set: vec![], out: None };
+    let out = infer(&run, &opts)?;
+    summary.last_ap3d = Some(out.ap3d);
+    summary.last_ap3d_by_range = Some(out.ap3d_by_range);
+    summary.last_heading = out.heading;
+    write_atomic(&run.summary_json(), serde_json::to_string_pretty(&summary)?.as_bytes())?;
+    Ok(summary)
 }
 
 /// Runs every job not finished yet with `run_job` (which trains into `job.dir`, resuming what is

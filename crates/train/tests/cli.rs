@@ -128,3 +128,38 @@ fn resumed_run_continues_exactly() {
     // The data of both runs spans an epoch boundary (2 train frames per epoch at batch 1).
     assert!(whole.column("epoch").unwrap().iter().any(|&e| e >= 1.0));
 }
+
+#[test]
+fn sweep_rescore_scores_finished_runs_with_new_post_processing_only() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = tmp.path().join("data");
+    let cfg = tiny_config(tmp.path(), &data, "");
+    let text = std::fs::read_to_string(&cfg).unwrap().replace("[train]\n", "[train]\nepochs = 1\n");
+    std::fs::write(&cfg, text).unwrap();
+    let sweep = tmp.path().join("s.toml");
+    let write_sweep = |set: &str| {
+        let runs = tmp.path().join("runs");
+        std::fs::write(&sweep, format!("base = \"cfg.toml\"\nout_dir = \"{}\"\nseeds = [0]\n[set]\n{set}\n", runs.display())).unwrap();
+    };
+    write_sweep("");
+    train_bin(&["sweep", sweep.to_str().unwrap()]);
+    let run = tmp.path().join("runs/s/base/seed-0");
+    let summary = |p: &Path| -> serde_json::Value { serde_json::from_str(&std::fs::read_to_string(p.join("summary.json")).unwrap()).unwrap() };
+    let before = summary(&run);
+    let metrics = std::fs::read_to_string(run.join("metrics.csv")).unwrap();
+    // Other post-processing: the scores change (as `infer` with the same settings gives them),
+    // the training record does not.
+    write_sweep("\"model.post.nms\" = \"none\"\n\"model.post.max_boxes\" = 3");
+    train_bin(&["sweep", sweep.to_str().unwrap(), "--rescore"]);
+    let after = summary(&run);
+    assert_ne!(before["last_ap3d"], after["last_ap3d"]);
+    assert_eq!((before["steps"].clone(), before["train_seconds"].clone()), (after["steps"].clone(), after["train_seconds"].clone()));
+    assert_eq!(metrics, std::fs::read_to_string(run.join("metrics.csv")).unwrap());
+    assert!(std::fs::read_to_string(run.join("config.toml")).unwrap().contains("max_boxes = 3"));
+    let eval: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(run.join("detections/val/eval.json")).unwrap()).unwrap();
+    assert_eq!(eval["ap3d"]["0.3"], after["last_ap3d"][0], "{eval}");
+    // A change to what the model learns is refused: retrain instead.
+    write_sweep("\"model.width\" = 0.25");
+    let out = Command::new(env!("CARGO_BIN_EXE_train")).args(["sweep", sweep.to_str().unwrap(), "--rescore"]).output().unwrap();
+    assert!(!out.status.success() && String::from_utf8_lossy(&out.stderr).contains("only [model.post] and [eval] may differ"));
+}
