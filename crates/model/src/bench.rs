@@ -54,6 +54,10 @@ pub struct BenchReport {
     pub backend: String,
     /// rayon threads.
     pub threads: usize,
+    /// The CPU's SIMD features (`sparse_conv::cpu_features`).
+    pub cpu_features: String,
+    /// The path the op's f32 CPU kernels took (`sparse_conv::cpu_kernel_path`).
+    pub cpu_kernels: String,
     /// Samples in the batch.
     pub batch: usize,
     /// Voxels in the batch.
@@ -196,6 +200,8 @@ pub fn run(cfg: &ModelConfig, batch: &Batch, device: &Device, backend: &str, par
         }
     };
     BenchReport {
+        cpu_features: sparse_conv::cpu_features(),
+        cpu_kernels: sparse_conv::cpu_kernel_path().to_string(),
         model: cfg.kind().to_string(),
         backend: backend.to_string(),
         threads: rayon_threads(),

@@ -54,7 +54,7 @@ pub use conv_norm::{ConvNormBackend, sparse_conv_norm_eval};
 pub use coords::{Coord, CoordError, CoordIndex};
 pub use kernel_map::{KernelMap, MapKind, NeighborTable};
 pub use op::sparse_conv;
-pub use options::{CpuKernels, KernelOptions};
+pub use options::{CpuKernels, KernelOptions, cpu_features, cpu_kernel_path};
 pub use output_grad::{OutputGradBackend, backward_from};
 pub use tensor::{MapCache, SparseTensor};
 pub use wgpu_device::wgpu_device;

@@ -101,6 +101,7 @@ fn main() -> anyhow::Result<()> {
             "{} on {} ({} threads): batch {}, {} voxels, {} parameters, median of {} runs",
             r.model, r.backend, r.threads, r.batch, r.voxels, r.parameters, r.runs
         );
+        println!("  CPU features: {}; f32 CPU kernels: {}", if r.cpu_features.is_empty() { "none detected" } else { &r.cpu_features }, r.cpu_kernels);
         if let (Some(forward), Some(detect), Some(peak)) = (r.forward_ms, r.detect_ms, r.peak_forward_mib) {
             println!("  inference forward   {forward:>10.1} ms   (detect incl. decode + NMS {detect:.1} ms)");
             print_kernels(r.forward_kernels, r.forward_mean_ms);

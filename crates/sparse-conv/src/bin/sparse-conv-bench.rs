@@ -135,6 +135,9 @@ struct Strided {
 
 #[derive(Serialize)]
 struct Report {
+    /// The CPU's SIMD features and the path the f32 CPU kernels took.
+    cpu_features: String,
+    cpu_kernels: String,
     voxels: usize,
     pairs: usize,
     backend: Backend,
@@ -286,6 +289,8 @@ fn measure(args: &Args, scene_coords: &[sparse_conv::Coord]) -> anyhow::Result<R
         }
     }
     let report = Report {
+        cpu_features: sparse_conv::cpu_features(),
+        cpu_kernels: sparse_conv::cpu_kernel_path().to_string(),
         voxels: n,
         pairs,
         backend: args.backend,
@@ -414,6 +419,7 @@ fn print_table(r: &Report) {
         "backend {:?}, {} threads, {} voxels, {} pairs (k={}), median (and min) of {} runs",
         r.backend, r.threads, r.voxels, r.pairs, r.kernel, r.runs
     );
+    println!("CPU features: {}; f32 CPU kernels: {}", if r.cpu_features.is_empty() { "none detected" } else { &r.cpu_features }, r.cpu_kernels);
     println!("submanifold map build: {:.2} ms", r.map_ms);
     if let Some(sgemm) = &r.sgemm {
         println!("SGEMM ceiling ({0}×{0}×{0}, the kernels' GEMM): {1:.1} GFLOP/s", sgemm.size, sgemm.gflops);
