@@ -19,10 +19,10 @@ use burn::backend::{Autodiff, Backend, Flex, NdArray, TensorMetadata, backend_ex
 use burn_cubecl::CubeBackend;
 use burn::tensor::{Shape, TensorData};
 
-use crate::cpu::{self, Element, PairDirection};
-use crate::cpu_norm;
-use crate::cube;
-use crate::kernel_map::KernelMap;
+use crate::kernels::cpu::{self, Element, PairDirection};
+use crate::kernels::cpu::norm as cpu_norm;
+use crate::kernels::cube;
+use crate::geometry::kernel_map::KernelMap;
 use crate::timing::{Kernel, count_conv_flops, in_kernel};
 
 /// A backend that can run the sparse convolution of a [`KernelMap`].
@@ -241,7 +241,7 @@ macro_rules! on_host {
 pub(crate) use on_host;
 
 /// The batch norm with fixed statistics (and its ReLU or a residual's sum and ReLU) that a CPU
-/// forward runs on its finished rows, as [`crate::cpu_norm::ConvEpilogue`] takes it.
+/// forward runs on its finished rows, as [`crate::kernels::cpu::norm::ConvEpilogue`] takes it.
 pub(crate) struct NormAfterConv<B: Backend> {
     pub stats: FloatTensor<B>,
     pub gamma: FloatTensor<B>,

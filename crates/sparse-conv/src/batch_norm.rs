@@ -23,7 +23,7 @@ use burn::tensor::{Shape, Slice, Tensor};
 use burn_cubecl::CubeBackend;
 
 use crate::backend::{Host, on_host};
-use crate::cpu_norm;
+use crate::kernels::cpu::norm as cpu_norm;
 use crate::timing::{Kernel, in_kernel};
 
 /// A backend that runs batch norm (+ ReLU) over `[rows, C]` features in a few passes.

@@ -17,7 +17,7 @@ use burn::backend::{Autodiff, Backend, Dispatch, Flex, NdArray, TensorMetadata, 
 use burn::tensor::{Shape, Slice, Tensor};
 use burn_cubecl::CubeBackend;
 use crate::backend::{Host, on_host};
-use crate::cpu::{Element, filled_in_chunks};
+use crate::kernels::cpu::{Element, filled_in_chunks};
 
 /// A backend that concatenates and splits `[rows, C]` features along the channels.
 #[backend_extension(NdArray, Flex, Cube, Fusion, Autodiff)]

@@ -17,7 +17,7 @@ use burn_cubecl::CubeBackend;
 
 use crate::backend::{NormAfterConv, SparseConvBackend, cpu_forward};
 use crate::batch_norm::{BatchNormBackend, Epilogue};
-use crate::kernel_map::KernelMap;
+use crate::geometry::kernel_map::KernelMap;
 use crate::op::check_conv_inputs;
 
 /// A backend that runs a sparse convolution and the batch norm after it (fixed statistics) as

@@ -1,14 +1,12 @@
 //! Sparse 3D convolution for Burn: voxel coordinates, kernel maps, a differentiable op with its
 //! own backward on every backend, and the modules a sparse U-Net is built from.
 //!
-//! - [`coords`]: batch-indexed voxel coordinates and their hash index.
-//! - [`kernel_map`]: rulebooks for submanifold, down-sampling and transposed convolutions.
-//! - [`cpu`]: the op's math over slices (forward, feature and weight gradients); `avx512`: the
-//!   f32 micro-kernels of all three for CPUs with AVX-512.
-//! - `cube`: the op's CubeCL kernels for GPUs (wgpu/Vulkan, CUDA, ROCm).
+//! - [`geometry`]: batch-indexed voxel coordinates and their hash index, kernel maps
+//!   (submanifold, down-sampling, transposed), the GPU's tile plans.
+//! - [`kernels`]: the math once per target: `kernels::cpu` (general kernels over slices, the
+//!   AVX-512 f32 ones, batch norm's passes, Adam's step) and the CubeCL kernels for GPUs.
 //! - [`backend`]: the Burn backend extension and its `Autodiff` backward.
-//! - [`cpu_norm`], [`batch_norm`]: batch norm (+ ReLU, + a residual's sum) as one op with its
-//!   own backward.
+//! - [`batch_norm`]: batch norm (+ ReLU, + a residual's sum) as one op with its own backward.
 //! - [`adam`]: Adam with the parameter and both moments updated in one pass per parameter.
 //! - [`concat`]: channel concatenation (skip connections) as one op with its own backward.
 //! - [`conv_norm`]: a conv and the batch norm after it at inference (fixed statistics, with
@@ -24,23 +22,18 @@
 //! - [`wgpu_device`]: the wgpu device on the platform's native graphics API (never OpenGL).
 
 pub mod adam;
-#[cfg(target_arch = "x86_64")]
-mod avx512;
 pub mod backend;
 pub mod batch_norm;
 pub mod concat;
 pub mod conv_norm;
-pub mod coords;
-pub mod cpu;
-pub mod cpu_norm;
-mod cube;
+pub mod geometry;
 pub mod heap;
-pub mod kernel_map;
+pub mod kernels;
 pub mod modules;
 pub mod op;
 pub mod options;
 pub mod output_grad;
-mod row_tiles;
+mod parallel;
 pub mod scene;
 pub mod tensor;
 pub mod timing;
@@ -51,8 +44,8 @@ pub use adam::{AdamBackend, FusedAdam, FusedAdamConfig};
 pub use batch_norm::{BatchNormBackend, Epilogue, batch_norm_eval, batch_norm_train};
 pub use concat::{ChannelConcatBackend, concat_channels};
 pub use conv_norm::{ConvNormBackend, sparse_conv_norm_eval};
-pub use coords::{Coord, CoordError, CoordIndex};
-pub use kernel_map::{KernelMap, MapKind, NeighborTable};
+pub use geometry::coords::{Coord, CoordError, CoordIndex};
+pub use geometry::kernel_map::{KernelMap, MapKind, NeighborTable};
 pub use op::sparse_conv;
 pub use options::{CpuKernels, KernelOptions, cpu_features, cpu_kernel_path};
 pub use output_grad::{OutputGradBackend, backward_from};

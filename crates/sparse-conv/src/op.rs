@@ -6,7 +6,7 @@ use burn::backend::Dispatch;
 use burn::tensor::Tensor;
 
 use crate::backend::SparseConvBackend;
-use crate::kernel_map::KernelMap;
+use crate::geometry::kernel_map::KernelMap;
 
 /// `out[o] = Σ_k Σ_{(i, o) ∈ M_k} features[i] · weight[k]`, differentiable in both arguments.
 ///

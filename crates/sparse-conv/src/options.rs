@@ -88,7 +88,7 @@ pub fn cpu_features() -> String {
 /// Which path the op's f32 CPU kernels take on this machine under the current options.
 pub fn cpu_kernel_path() -> &'static str {
     #[cfg(target_arch = "x86_64")]
-    if crate::avx512::available() {
+    if crate::kernels::cpu::avx512_enabled() {
         return "AVX-512F micro-kernels";
     }
     "generic gather–GEMM–scatter (matrixmultiply)"

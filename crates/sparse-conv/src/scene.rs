@@ -5,7 +5,7 @@ use std::path::Path;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use crate::coords::Coord;
+use crate::geometry::coords::Coord;
 
 /// Reads int32 or int64 voxel coordinates, `N×4` (batch, x, y, z) or `N×3` (batch 0), from a
 /// NumPy `.npy` file (C order, little-endian).

@@ -6,8 +6,8 @@ use std::sync::{Arc, Mutex};
 use burn::tensor::Tensor;
 
 use crate::timing::{Kernel, in_kernel};
-use crate::coords::{Coord, CoordError, CoordIndex};
-use crate::kernel_map::{KernelMap, MapKind};
+use crate::geometry::coords::{Coord, CoordError, CoordIndex};
+use crate::geometry::kernel_map::{KernelMap, MapKind};
 
 /// Features `[N, C]` on the voxels `coords` of one level of a sparse network.
 ///

@@ -10,7 +10,7 @@ use clap::{Parser, ValueEnum};
 use serde::Serialize;
 use sparse_conv::burn::tensor::{Device, Distribution, Tensor};
 use sparse_conv::timing::{self, Timing, median_ms, peak_rss_mb, time_ms};
-use sparse_conv::cpu::{self, PairDirection};
+use sparse_conv::kernels::cpu::{self, PairDirection};
 use sparse_conv::{CoordIndex, KernelMap, backward_from, scene, sparse_conv};
 
 #[derive(Clone, Copy, Debug, ValueEnum, Serialize)]
@@ -194,7 +194,7 @@ fn main() -> anyhow::Result<()> {
 fn measure(args: &Args, scene_coords: &[sparse_conv::Coord]) -> anyhow::Result<Report> {
     let threads = rayon::current_num_threads();
     let coords = scene::tile_as_batch(scene_coords, args.scale[0]);
-    sparse_conv::coords::validate(&coords).context("scene coordinates")?;
+    sparse_conv::geometry::coords::validate(&coords).context("scene coordinates")?;
     let device = match args.backend {
         Backend::Flex => Device::flex(),
         #[allow(deprecated)]

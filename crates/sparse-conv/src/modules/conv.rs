@@ -10,7 +10,7 @@ use burn::tensor::{Device, Tensor};
 use super::SparseBatchNorm;
 use crate::SparseTensor;
 use crate::batch_norm::Epilogue;
-use crate::kernel_map::KernelMap;
+use crate::geometry::kernel_map::KernelMap;
 use crate::op::sparse_conv;
 
 /// `U(±bound)` for a `[K, C_in, C_out]` weight.

@@ -10,7 +10,7 @@ use burn::tensor::{Device, Tensor};
 use crate::SparseTensor;
 use crate::batch_norm::{Epilogue, batch_norm_eval, batch_norm_train};
 use crate::conv_norm::sparse_conv_norm_eval;
-use crate::kernel_map::KernelMap;
+use crate::geometry::kernel_map::KernelMap;
 use crate::op::sparse_conv;
 
 /// Configuration of a [`SparseBatchNorm`]; the defaults are PyTorch's `BatchNorm1d` (spec §1.6).

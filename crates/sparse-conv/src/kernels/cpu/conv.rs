@@ -7,136 +7,10 @@
 
 use rayon::prelude::*;
 
-use crate::cpu_norm::ConvEpilogue;
-use crate::kernel_map::OffsetPairs;
-
-/// Pairs per partial sum of the weight gradient.
-pub(crate) const GRAD_CHUNK: usize = 2048;
-
-/// A float type the kernels run on, with its GEMM.
-pub trait Element:
-    Copy
-    + Send
-    + Sync
-    + Default
-    + PartialOrd
-    + std::ops::AddAssign
-    + std::ops::Add<Output = Self>
-    + std::ops::Sub<Output = Self>
-    + std::ops::Mul<Output = Self>
-    + std::ops::Div<Output = Self>
-    + 'static
-{
-    /// `C = A·B + beta·C` with arbitrary strides (matrixmultiply's contract).
-    ///
-    /// # Safety
-    /// The pointers and strides must describe valid `m×k`, `k×n` and `m×n` matrices.
-    #[allow(clippy::too_many_arguments)]
-    unsafe fn gemm(
-        m: usize, k: usize, n: usize,
-        a: *const Self, rsa: isize, csa: isize,
-        b: *const Self, rsb: isize, csb: isize,
-        beta: Self, c: *mut Self, rsc: isize, csc: isize,
-    );
-    const ZERO: Self;
-    const ONE: Self;
-    fn to_f64(self) -> f64;
-    fn from_f64(v: f64) -> Self;
-    fn sqrt(self) -> Self;
-
-    /// [`weight_grad`] by a kernel specific to this type and CPU, where one runs.
-    fn weight_grad_native(_x: &[Self], _c_in: usize, _grad_out: &[Self], _c_out: usize, _pairs: &OffsetPairs) -> Option<Vec<Self>> {
-        None
-    }
-
-    /// The sums of [`crate::cpu_norm::channel_stats`] over a chunk of rows by a kernel specific
-    /// to this type and CPU, where one runs (the same bits as the general loops).
-    fn stats_sums_native(_x: &[Self], _c: usize, _shift: &[Self]) -> Option<Vec<f64>> {
-        None
-    }
-
-    /// The sums of [`crate::cpu_norm::param_grads`] over a chunk of rows, likewise.
-    #[allow(clippy::too_many_arguments)]
-    fn param_sums_native(_x: &[Self], _g: &[Self], _c: usize, _a: &[Self], _b: &[Self], _mean: &[Self], _relu: bool) -> Option<Vec<f64>> {
-        None
-    }
-
-    /// [`pair_conv`] by a kernel specific to this type and CPU, where one runs.
-    #[allow(clippy::too_many_arguments)]
-    fn pair_conv_native(
-        _src: &[Self], _c_src: usize, _weight: &[Self], _c_dst: usize, _n_dst: usize,
-        _direction: PairDirection, _pairs: &OffsetPairs, _identity: Option<usize>, _epilogue: Option<&ConvEpilogue<'_, Self>>,
-    ) -> Option<Vec<Self>> {
-        None
-    }
-}
-
-impl Element for f32 {
-    unsafe fn gemm(
-        m: usize, k: usize, n: usize,
-        a: *const f32, rsa: isize, csa: isize,
-        b: *const f32, rsb: isize, csb: isize,
-        beta: f32, c: *mut f32, rsc: isize, csc: isize,
-    ) {
-        unsafe { matrixmultiply::sgemm(m, k, n, 1.0, a, rsa, csa, b, rsb, csb, beta, c, rsc, csc) }
-    }
-    const ZERO: f32 = 0.0;
-    const ONE: f32 = 1.0;
-    fn to_f64(self) -> f64 {
-        self as f64
-    }
-    fn from_f64(v: f64) -> f32 {
-        v as f32
-    }
-    fn sqrt(self) -> f32 {
-        f32::sqrt(self)
-    }
-
-    #[cfg(target_arch = "x86_64")]
-    fn weight_grad_native(x: &[f32], c_in: usize, grad_out: &[f32], c_out: usize, pairs: &OffsetPairs) -> Option<Vec<f32>> {
-        crate::avx512::available().then(|| crate::avx512::weight_grad(x, c_in, grad_out, c_out, pairs))
-    }
-
-    #[cfg(target_arch = "x86_64")]
-    fn stats_sums_native(x: &[f32], c: usize, shift: &[f32]) -> Option<Vec<f64>> {
-        crate::avx512::available().then(|| crate::avx512::stats_sums(x, c, shift))
-    }
-
-    #[cfg(target_arch = "x86_64")]
-    fn param_sums_native(x: &[f32], g: &[f32], c: usize, a: &[f32], b: &[f32], mean: &[f32], relu: bool) -> Option<Vec<f64>> {
-        crate::avx512::available().then(|| crate::avx512::param_sums(x, g, c, a, b, mean, relu))
-    }
-
-    #[cfg(target_arch = "x86_64")]
-    fn pair_conv_native(
-        src: &[f32], c_src: usize, weight: &[f32], c_dst: usize, n_dst: usize,
-        direction: PairDirection, pairs: &OffsetPairs, identity: Option<usize>, epilogue: Option<&ConvEpilogue<'_, f32>>,
-    ) -> Option<Vec<f32>> {
-        crate::avx512::available().then(|| crate::avx512::pair_conv(src, c_src, weight, c_dst, n_dst, direction, pairs, identity, epilogue))
-    }
-}
-
-impl Element for f64 {
-    unsafe fn gemm(
-        m: usize, k: usize, n: usize,
-        a: *const f64, rsa: isize, csa: isize,
-        b: *const f64, rsb: isize, csb: isize,
-        beta: f64, c: *mut f64, rsc: isize, csc: isize,
-    ) {
-        unsafe { matrixmultiply::dgemm(m, k, n, 1.0, a, rsa, csa, b, rsb, csb, beta, c, rsc, csc) }
-    }
-    const ZERO: f64 = 0.0;
-    const ONE: f64 = 1.0;
-    fn to_f64(self) -> f64 {
-        self
-    }
-    fn from_f64(v: f64) -> f64 {
-        v
-    }
-    fn sqrt(self) -> f64 {
-        f64::sqrt(self)
-    }
-}
+use super::element::{Element, GRAD_CHUNK, PairDirection, RowEpilogue, filled_in_chunks, scratch};
+use crate::parallel::SyncPtr;
+use super::norm::ConvEpilogue;
+use crate::geometry::kernel_map::OffsetPairs;
 
 /// Largest `m·k + k·n` of one GEMM call that matrixmultiply 0.3 runs on the calling thread: from
 /// `2^15` on (its `threading.rs` heuristic, with the `threading` feature Burn turns on) it spreads
@@ -151,7 +25,7 @@ const SERIAL_GEMM_SIZE: usize = (1 << 15) - 1;
 /// # Safety
 /// As [`Element::gemm`].
 #[allow(clippy::too_many_arguments)]
-pub unsafe fn serial_gemm<T: Element>(
+pub(crate) unsafe fn serial_gemm<T: Element>(
     m: usize, k: usize, n: usize,
     a: *const T, rsa: isize, csa: isize,
     b: *const T, rsb: isize, csb: isize,
@@ -267,70 +141,6 @@ pub fn weight_grad<T: Element>(
 /// Rows per GEMM of the offset-major kernel.
 const CHUNK_ROWS: usize = 256;
 
-/// Which side of each pair a pass gathers from.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum PairDirection {
-    /// Gather inputs, scatter to outputs: the forward.
-    Forward,
-    /// Gather output gradients, scatter to inputs: the feature gradient.
-    Backward,
-}
-
-/// `len` elements of scratch space, not initialised.
-pub(crate) fn scratch<T>(len: usize) -> Vec<std::mem::MaybeUninit<T>> {
-    let mut v = Vec::with_capacity(len);
-    // SAFETY: MaybeUninit needs no initialisation.
-    unsafe { v.set_len(len) };
-    v
-}
-
-/// `v` as the values written into it.
-///
-/// # Safety
-/// Every element of `v` must have been written.
-pub(crate) unsafe fn assume_init<T>(v: Vec<std::mem::MaybeUninit<T>>) -> Vec<T> {
-    let mut v = std::mem::ManuallyDrop::new(v);
-    // SAFETY: MaybeUninit<T> has T's layout; the caller vouches for every element.
-    unsafe { Vec::from_raw_parts(v.as_mut_ptr().cast::<T>(), v.len(), v.capacity()) }
-}
-
-/// A `len`-element output written in parallel, `chunk` elements per task (the last may be
-/// shorter), without zeroing it first: `fill(i, dst)` gets chunk `i` and must write every
-/// element of it.
-pub(crate) fn filled_in_chunks<T: Send>(len: usize, chunk: usize, fill: impl Fn(usize, &mut [std::mem::MaybeUninit<T>]) + Sync) -> Vec<T> {
-    let mut out = Vec::with_capacity(len);
-    out.spare_capacity_mut()[..len].par_chunks_mut(chunk.max(1)).enumerate().for_each(|(i, dst)| fill(i, dst));
-    // SAFETY: the chunks cover all `len` elements and `fill` writes every element of each.
-    unsafe { out.set_len(len) };
-    out
-}
-
-/// A raw pointer tasks share, each writing its own disjoint part.
-pub(crate) struct SyncPtr<T>(pub(crate) *mut T);
-unsafe impl<T> Send for SyncPtr<T> {}
-unsafe impl<T> Sync for SyncPtr<T> {}
-
-/// Runs `f` compiled for AVX-512 where the CPU has it (and `KernelOptions` allows it). Plain
-/// loops over channels or elements are vectorized for the features of the function they land
-/// in, so only if LLVM inlines `f` into it: a small closure calling an `#[inline(always)]`
-/// function is (Adam's chunks, the ReLU gradient); the batch-norm passes' row closures were not,
-/// which the binary shows (`zmm` or only `xmm` in the symbol). The default x86-64 target has
-/// 128-bit SSE2 only. Without fused multiply-adds
-/// (Rust never contracts `a·b + c`) the results are the same bits either way.
-#[inline(always)]
-pub(crate) fn vectorized<R>(f: impl FnOnce() -> R) -> R {
-    #[cfg(target_arch = "x86_64")]
-    if crate::avx512::available() {
-        #[target_feature(enable = "avx512f")]
-        unsafe fn with_avx512<R>(f: impl FnOnce() -> R) -> R {
-            f()
-        }
-        // SAFETY: the CPU has AVX-512F.
-        return unsafe { with_avx512(f) };
-    }
-    f()
-}
-
 /// Offset-major gather–GEMM–scatter: for each offset in a fixed order, its pairs in chunks of
 /// [`CHUNK_ROWS`] (gather rows, one GEMM with `W_k`, add the products to their destination rows).
 ///
@@ -357,7 +167,7 @@ pub fn pair_conv<T: Element>(
     if let Some(e) = epilogue {
         assert_eq!(e.channels(), c_dst, "the epilogue's channels differ from the conv's output");
     }
-    if let Some(out) = T::pair_conv_native(src, c_src, weight, c_dst, n_dst, direction, pairs, identity, epilogue) {
+    if let Some(out) = T::pair_conv_native(src, c_src, weight, c_dst, n_dst, direction, pairs, identity, epilogue.map(|e| e as &dyn RowEpilogue<T>)) {
         return out;
     }
     let volume = pairs.start.len() - 1;

@@ -7,7 +7,7 @@
 //! spconv's implicit GEMM does) makes a tile's rows alike, and each tile lists only the offsets
 //! some row of it uses.
 
-use crate::kernel_map::NeighborTable;
+use crate::geometry::kernel_map::NeighborTable;
 
 /// Rows in tile order and, per tile, the offsets its rows use.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -90,8 +90,8 @@ fn radix_order(keys: &[u64]) -> Vec<u32> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::coords::{Coord, CoordIndex};
-    use crate::kernel_map::KernelMap;
+    use crate::geometry::coords::{Coord, CoordIndex};
+    use crate::geometry::kernel_map::KernelMap;
 
     #[test]
     fn radix_order_is_the_order_by_key_then_index() {

@@ -1,7 +1,7 @@
 //! Batch norm, optionally followed by ReLU, over `[rows, C]` slices: the statistics, the
 //! normalisation and its two gradients, each one pass over the rows. Every CPU backend calls
 //! these; composed over Burn primitives the same layer takes about a dozen passes each way, with
-//! transposed copies of the activations (measured: a quarter of a MinkUNet training step).
+//! transposed copies of the activations (a quarter of a MinkUNet training step, `crates/sparse-conv/README.md`).
 //!
 //! Conventions: `stats` is `[mean_0..mean_C, var_0..var_C]` with the biased variance (what the
 //! output is normalised with, and what Burn's running variance takes; PyTorch's running variance
@@ -18,7 +18,7 @@ use std::mem::MaybeUninit;
 
 use rayon::prelude::*;
 
-use crate::cpu::{Element, filled_in_chunks, vectorized};
+use super::element::{Element, RowEpilogue, filled_in_chunks, vectorized};
 
 /// Rows per partial sum and per parallel task.
 const CHUNK_ROWS: usize = 1024;
@@ -242,6 +242,18 @@ impl<'a, T: Element> ConvEpilogue<'a, T> {
                 }
             }
         }
+    }
+}
+
+impl<T: Element> RowEpilogue<T> for ConvEpilogue<'_, T> {
+    fn channels(&self) -> usize {
+        ConvEpilogue::channels(self)
+    }
+    fn apply(&self, first: usize, rows: &mut [T]) {
+        ConvEpilogue::apply(self, first, rows)
+    }
+    fn apply_all(&self, out: &mut [T]) {
+        ConvEpilogue::apply_all(self, out)
     }
 }
 

@@ -2,7 +2,7 @@
 //!
 //! - Weight gradient: the micro-kernel reads each pair's input and output-gradient rows in
 //!   place, through the kernel map, and accumulates the outer products in registers. The
-//!   general path ([`crate::cpu::weight_grad`]) gathers both rows into tiles and lets
+//!   general path ([`weight_grad`](super::weight_grad)) gathers both rows into tiles and lets
 //!   matrixmultiply pack the tiles again before multiplying.
 //! - Forward and feature gradient ([`pair_conv`]): by destination blocks when each offset's
 //!   pairs come ordered by destination row (as [`crate::KernelMap::pairs`] and
@@ -28,9 +28,10 @@ use std::arch::x86_64::*;
 
 use rayon::prelude::*;
 
-use crate::cpu::{PairDirection, SyncPtr, assume_init, grad_chunks, scratch};
-use crate::cpu_norm::ConvEpilogue;
-use crate::kernel_map::OffsetPairs;
+use super::conv::grad_chunks;
+use super::element::{PairDirection, RowEpilogue, assume_init, avx512_enabled, scratch};
+use crate::geometry::kernel_map::OffsetPairs;
+use crate::parallel::SyncPtr;
 
 /// Columns per tile: two 16-lane vectors.
 const NR: usize = 32;
@@ -40,11 +41,6 @@ const MR: usize = 12;
 /// Pairs per block: their rows stay in L1 while every tile of the partial passes over them.
 const PAIR_BLOCK: usize = 32;
 
-/// Whether these kernels run: the CPU has AVX-512F and [`KernelOptions`](crate::KernelOptions)
-/// does not ask for the general path.
-pub fn available() -> bool {
-    crate::KernelOptions::current().cpu == crate::CpuKernels::Auto && std::arch::is_x86_feature_detected!("avx512f")
-}
 
 /// The float at `p` in every lane. (Through a load intrinsic rather than `*p`, and with
 /// `wrapping_add` in the loops: the dev profile keeps debug assertions, whose pointer checks on
@@ -323,7 +319,7 @@ fn pack_panels(weight: &[f32], volume: usize, c_src: usize, c_dst: usize, rs: us
     packed
 }
 
-/// [`crate::cpu::pair_conv`] for f32 on AVX-512; same arguments and result, up to rounding.
+/// [`pair_conv`](super::pair_conv) for f32 on AVX-512; same arguments and result, up to rounding.
 #[allow(clippy::too_many_arguments)]
 pub fn pair_conv(
     src: &[f32],
@@ -334,9 +330,9 @@ pub fn pair_conv(
     direction: PairDirection,
     pairs: &OffsetPairs,
     identity: Option<usize>,
-    epilogue: Option<&ConvEpilogue<'_, f32>>,
+    epilogue: Option<&dyn RowEpilogue<f32>>,
 ) -> Vec<f32> {
-    assert!(available(), "AVX-512F kernels called on a CPU without AVX-512F");
+    assert!(avx512_enabled(), "AVX-512F kernels called on a CPU without AVX-512F");
     let volume = pairs.start.len() - 1;
     assert_eq!(weight.len(), volume * c_src * c_dst, "weight does not match the map and channels");
     if n_dst == 0 || c_dst == 0 {
@@ -562,9 +558,9 @@ pub fn pair_conv(
     out
 }
 
-/// [`crate::cpu::weight_grad`] for f32 on AVX-512; same arguments and result.
+/// [`weight_grad`](super::weight_grad) for f32 on AVX-512; same arguments and result.
 pub fn weight_grad(x: &[f32], c_in: usize, grad_out: &[f32], c_out: usize, pairs: &OffsetPairs) -> Vec<f32> {
-    assert!(available(), "AVX-512F kernels called on a CPU without AVX-512F");
+    assert!(avx512_enabled(), "AVX-512F kernels called on a CPU without AVX-512F");
     let volume = pairs.start.len() - 1;
     let block = c_in * c_out;
     if block == 0 {
@@ -679,7 +675,7 @@ unsafe fn add_to_totals(s1: __m512, s2: __m512, t1: *mut f64, t2: *mut f64, lane
 /// with `d = x − shift`, in blocks of 16 rows summed in f32 then added in f64, as the general
 /// loops do, so the same bits.
 pub fn stats_sums(x: &[f32], c: usize, shift: &[f32]) -> Vec<f64> {
-    assert!(available(), "AVX-512F kernels called on a CPU without AVX-512F");
+    assert!(avx512_enabled(), "AVX-512F kernels called on a CPU without AVX-512F");
     assert!(shift.len() == c && x.len().is_multiple_of(c), "rows of {c} channels");
     let mut total = vec![0.0f64; 2 * c];
     // SAFETY: AVX-512F; the loops stay inside x, shift and total.
@@ -714,7 +710,7 @@ unsafe fn stats_sums_avx512(x: &[f32], c: usize, shift: &[f32], total: &mut [f64
 /// [`stats_sums`], the same bits as the general loops.
 #[allow(clippy::too_many_arguments)]
 pub fn param_sums(x: &[f32], g: &[f32], c: usize, a: &[f32], b: &[f32], mean: &[f32], relu: bool) -> Vec<f64> {
-    assert!(available(), "AVX-512F kernels called on a CPU without AVX-512F");
+    assert!(avx512_enabled(), "AVX-512F kernels called on a CPU without AVX-512F");
     assert!(a.len() == c && b.len() == c && mean.len() == c && x.len().is_multiple_of(c) && g.len() == x.len(), "rows of {c} channels");
     let mut total = vec![0.0f64; 2 * c];
     // SAFETY: AVX-512F; the loops stay inside the slices.
@@ -755,14 +751,15 @@ unsafe fn param_sums_avx512(x: &[f32], g: &[f32], c: usize, a: &[f32], b: &[f32]
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::cpu::GRAD_CHUNK;
+    use super::super::element::GRAD_CHUNK;
+    use super::super::norm::ConvEpilogue;
 
     /// Against a naive f64 sum, on offsets of several chunks (the partials path), none (zeros)
     /// and a few pairs, with channel counts that leave partial row and column tiles; and the same
     /// bits at one and two threads.
     #[test]
     fn weight_grad_matches_a_naive_sum() {
-        if !available() {
+        if !avx512_enabled() {
             return;
         }
         let (c_in, c_out, n) = (13, 37, 700);
@@ -801,7 +798,7 @@ mod tests {
     #[test]
     fn destination_blocks_match_the_per_offset_path() {
         use crate::{Coord, CoordIndex, KernelMap};
-        if !available() {
+        if !avx512_enabled() {
             return;
         }
         let coords: Vec<Coord> = {

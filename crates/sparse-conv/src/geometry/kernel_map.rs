@@ -6,8 +6,8 @@ use std::sync::{Arc, Mutex, OnceLock};
 
 use rayon::prelude::*;
 
-use crate::coords::{Coord, CoordError, CoordIndex, pack};
-use crate::cpu::SyncPtr;
+use crate::geometry::coords::{Coord, CoordError, CoordIndex, pack};
+use crate::parallel::SyncPtr;
 
 /// Marks "no row" in a [`NeighborTable`].
 pub const NONE: u32 = u32::MAX;

@@ -1,6 +1,6 @@
 //! The sparse convolution as CubeCL kernels, for every cubecl runtime (wgpu/Vulkan, CUDA, ROCm).
 //!
-//! The same sums as [`crate::cpu`], arranged for a GPU as tiled products through shared memory:
+//! The same sums as [`super::cpu`], arranged for a GPU as tiled products through shared memory:
 //! - forward and feature gradient are one output-stationary gather over a [`NeighborTable`]. A
 //!   cube owns a tile of rows (sorted by the offsets they use, [`RowTiles`]) and of output
 //!   channels, stages its rows' partners and each used offset's weight in shared memory, and each
@@ -34,8 +34,8 @@ use burn_cubecl::kernel::into_contiguous;
 use burn_cubecl::tensor::CubeTensor;
 use burn_cubecl::{CubeBackend, CubeDevice};
 
-use crate::kernel_map::{KernelMap, NeighborTable};
-use crate::row_tiles::RowTiles;
+use crate::geometry::kernel_map::{KernelMap, NeighborTable};
+use crate::geometry::row_tiles::RowTiles;
 use crate::timing::{Kernel, in_kernel};
 
 /// Rows of a gather tile.
@@ -376,7 +376,7 @@ fn sum_slices_kernel<F: Float, N: Size>(partial: &[Vector<F, N>], out: &mut [Vec
     out[i] = sum;
 }
 
-/// One Adam step per element ([`crate::adam`]'s arithmetic): `out = [θ'; m₁'; m₂']`, each `len`,
+/// One Adam step per element (`crate::adam`'s arithmetic): `out = [θ'; m₁'; m₂']`, each `len`,
 /// with `amsgrad` also the new running maximum of m₂ (Burn's `max_pair`: `b` where the old
 /// maximum is lower).
 #[cube(launch_unchecked)]
@@ -454,7 +454,7 @@ struct DeviceTables {
     /// The forward's gather (rows: outputs) and the feature gradient's (rows: inputs).
     forward: OnceLock<GatherTables>,
     backward: OnceLock<GatherTables>,
-    /// `start`, `input`, `output` of [`crate::kernel_map::OffsetPairs`].
+    /// `start`, `input`, `output` of [`crate::geometry::kernel_map::OffsetPairs`].
     pairs: OnceLock<[Handle; 3]>,
 }
 
@@ -677,8 +677,8 @@ pub(crate) fn runs(t: &CubeTensor) -> bool {
     t.dtype() == DType::F32
 }
 
-/// One Adam step of a flat f32 parameter on a cube device, `[3, n]` (see [`crate::adam`]).
-pub(crate) fn adam_step(param: CubeTensor, grad: CubeTensor, moment_1: CubeTensor, moment_2: CubeTensor, max_moment_2: Option<CubeTensor>, s: crate::adam::AdamScalars<f32>) -> CubeTensor {
+/// One Adam step of a flat f32 parameter on a cube device, `[3, n]` (see `crate::adam`).
+pub(crate) fn adam_step(param: CubeTensor, grad: CubeTensor, moment_1: CubeTensor, moment_2: CubeTensor, max_moment_2: Option<CubeTensor>, s: crate::kernels::cpu::adam::AdamScalars<f32>) -> CubeTensor {
     let amsgrad = max_moment_2.is_some();
     // Without AMSGrad the kernel never reads the maximum; m₂ stands in for the binding.
     let max_moment_2 = max_moment_2.unwrap_or_else(|| moment_2.clone());

@@ -1,0 +1,6 @@
+//! Where the op's work is: voxel coordinates and their index, the kernel maps that pair input and
+//! output voxels per offset, and the GPU's tile plans over those maps.
+
+pub mod coords;
+pub mod kernel_map;
+pub(crate) mod row_tiles;

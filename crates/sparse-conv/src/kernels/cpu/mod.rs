@@ -1,0 +1,26 @@
+//! The sparse convolution and batch norm over plain slices: forward, feature gradient, weight
+//! gradient, and the norm's statistics, normalisation and gradients. Every CPU backend calls these;
+//! the GPU kernels compute the same sums.
+//!
+//! Determinism: every output row sums its offsets in one fixed order, and the weight gradient's
+//! partial sums are cut at sizes that depend only on the problem, never on the number of threads,
+//! so results are bit-identical at any thread count (no atomics, no two tasks writing one row).
+//!
+//! Layout: [`Element`] (`element`) is what the kernels share and the leaf every other file here
+//! depends on; `conv` and [`norm`] are the general kernels; `native` gives f32 its hooks into
+//! `avx512`, the f32 kernels for x86-64 CPUs with AVX-512F, which fall back on nothing but
+//! `element` and `conv`.
+
+pub mod adam;
+#[cfg(target_arch = "x86_64")]
+mod avx512;
+mod conv;
+mod element;
+mod native;
+pub mod norm;
+
+pub use conv::{pair_conv, weight_grad};
+pub use element::{Element, PairDirection, RowEpilogue};
+pub(crate) use element::filled_in_chunks;
+#[cfg(target_arch = "x86_64")]
+pub(crate) use element::avx512_enabled;
