@@ -162,14 +162,20 @@ impl<B: AdamBackend, C: CheckpointStrategy> AdamBackend for Autodiff<B, C> {}
 #[derive(Config, Debug)]
 pub struct FusedAdamConfig {
     #[config(default = 0.9)]
+    /// β₁ (0.9).
     pub beta_1: f32,
     #[config(default = 0.999)]
+    /// β₂ (0.999).
     pub beta_2: f32,
     #[config(default = 1e-5)]
+    /// ε (1e-5, Burn's default).
     pub epsilon: f32,
     #[config(default = false)]
+    /// AMSGrad: divide by the running maximum of m₂.
     pub amsgrad: bool,
+    /// L2 weight decay added to the gradient.
     pub weight_decay: Option<WeightDecayConfig>,
+    /// Gradient clipping before the step.
     pub grad_clipping: Option<GradientClippingConfig>,
 }
 

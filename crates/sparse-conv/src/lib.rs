@@ -21,6 +21,8 @@
 //! - [`timing`]: medians and peak memory for the benchmark binaries.
 //! - [`wgpu_device`]: the wgpu device on the platform's native graphics API (never OpenGL).
 
+#![warn(missing_docs)]
+
 pub mod adam;
 pub mod backend;
 pub mod batch_norm;

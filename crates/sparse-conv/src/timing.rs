@@ -9,7 +9,9 @@ use std::time::Instant;
 /// the steadier figure (other load only ever adds time); the median is the typical one.
 #[derive(Debug, Clone, Copy, Serialize)]
 pub struct Timing {
+    /// Median.
     pub median_ms: f64,
+    /// Minimum.
     pub min_ms: f64,
 }
 
@@ -85,10 +87,15 @@ pub fn in_kernel<R>(kernel: Kernel, f: impl FnOnce() -> R) -> R {
 /// readings give a stretch of work's share.
 #[derive(Debug, Clone, Copy, Default, Serialize, PartialEq)]
 pub struct KernelTimes {
+    /// Building kernel maps.
     pub map_build_ms: f64,
+    /// Convolution forwards.
     pub conv_forward_ms: f64,
+    /// Convolution feature gradients.
     pub conv_input_grad_ms: f64,
+    /// Convolution weight gradients.
     pub conv_weight_grad_ms: f64,
+    /// Batch norm, forward and backward.
     pub batch_norm_ms: f64,
     /// Operations of the three convolution kernels, in GFLOP (2 per multiply-add).
     pub conv_gflop: f64,

@@ -17,13 +17,37 @@ const BATCH_MAX: i64 = (1 << BATCH_BITS) - 1;
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum CoordError {
     /// A coordinate lies outside the range a packed key can hold.
-    OutOfRange { row: usize, coord: Coord },
+    OutOfRange {
+        /// The row of the coordinate.
+        row: usize,
+        /// The coordinate.
+        coord: Coord,
+    },
     /// The same voxel appears twice: a sparse tensor holds each voxel once.
-    Duplicate { first: usize, second: usize, coord: Coord },
+    Duplicate {
+        /// The row of its first occurrence.
+        first: usize,
+        /// The row of the repeat.
+        second: usize,
+        /// The voxel.
+        coord: Coord,
+    },
     /// Features and coordinates disagree on the number of voxels.
-    FeatureRows { features: usize, coords: usize },
+    FeatureRows {
+        /// Feature rows.
+        features: usize,
+        /// Coordinates.
+        coords: usize,
+    },
     /// A coordinate of a level of tensor stride `stride` is not a multiple of it.
-    OffGrid { row: usize, coord: Coord, stride: i32 },
+    OffGrid {
+        /// The row of the coordinate.
+        row: usize,
+        /// The coordinate.
+        coord: Coord,
+        /// The level's tensor stride.
+        stride: i32,
+    },
 }
 
 impl fmt::Display for CoordError {

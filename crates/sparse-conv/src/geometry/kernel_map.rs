@@ -53,7 +53,9 @@ impl NeighborTable {
 pub struct OffsetPairs {
     /// `start[k]..start[k + 1]` indexes the pairs of offset `k`.
     pub start: Vec<usize>,
+    /// The input row of each pair.
     pub input: Vec<u32>,
+    /// The output row of each pair.
     pub output: Vec<u32>,
 }
 
@@ -61,11 +63,20 @@ pub struct OffsetPairs {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum MapKind {
     /// Odd kernel `k`, output coordinates = input coordinates.
-    Submanifold { kernel: usize },
+    Submanifold {
+        /// Kernel size (odd).
+        kernel: usize,
+    },
     /// Kernel = stride = `kernel`: outputs at `floor(c / (kernel·s))·(kernel·s)`.
-    Down { kernel: usize },
+    Down {
+        /// Kernel size and stride.
+        kernel: usize,
+    },
     /// The transposed `Down` map: outputs land on the finer level's coordinates.
-    Up { kernel: usize },
+    Up {
+        /// Kernel size and stride of the `Down` map it reverses.
+        kernel: usize,
+    },
 }
 
 /// A rulebook between an input and an output coordinate set.

@@ -14,19 +14,24 @@ use crate::batch_norm::Epilogue;
 /// Configuration of a [`ConvBnRelu`].
 #[derive(Config, Debug)]
 pub struct ConvBnReluConfig {
+    /// Input and output channels.
     pub channels: [usize; 2],
     #[config(default = 2)]
+    /// Kernel size.
     pub kernel_size: usize,
 }
 
 /// Down-sampling conv (kernel = stride) → BN → ReLU: `BasicConvolutionBlock(k=2, s=2)`.
 #[derive(Module, Debug)]
 pub struct ConvBnRelu {
+    /// The strided convolution.
     pub conv: SparseConv3d,
+    /// Its batch norm.
     pub norm: SparseBatchNorm,
 }
 
 impl ConvBnReluConfig {
+    /// A module with fresh parameters on `device`.
     pub fn init(&self, device: &Device) -> ConvBnRelu {
         ConvBnRelu {
             conv: SparseConv3dConfig::new(self.channels).with_kernel_size(self.kernel_size).init(device),
@@ -36,6 +41,7 @@ impl ConvBnReluConfig {
 }
 
 impl ConvBnRelu {
+    /// Applies the module to `x`'s features, on `x`'s coordinates (or the level it maps to).
     pub fn forward(&self, x: SparseTensor) -> SparseTensor {
         self.conv.forward_norm(x, &self.norm, Epilogue::Relu)
     }
@@ -44,19 +50,24 @@ impl ConvBnRelu {
 /// Configuration of a [`DeconvBnRelu`].
 #[derive(Config, Debug)]
 pub struct DeconvBnReluConfig {
+    /// Input and output channels.
     pub channels: [usize; 2],
     #[config(default = 2)]
+    /// Kernel size.
     pub kernel_size: usize,
 }
 
 /// Transposed conv → BN → ReLU: `BasicDeconvolutionBlock(k=2, s=2)`.
 #[derive(Module, Debug)]
 pub struct DeconvBnRelu {
+    /// The transposed convolution.
     pub conv: SparseConvTranspose3d,
+    /// Its batch norm.
     pub norm: SparseBatchNorm,
 }
 
 impl DeconvBnReluConfig {
+    /// A module with fresh parameters on `device`.
     pub fn init(&self, device: &Device) -> DeconvBnRelu {
         DeconvBnRelu {
             conv: SparseConvTranspose3dConfig::new(self.channels).with_kernel_size(self.kernel_size).init(device),
@@ -66,6 +77,7 @@ impl DeconvBnReluConfig {
 }
 
 impl DeconvBnRelu {
+    /// Applies the module to `x`'s features, on `x`'s coordinates (or the level it maps to).
     pub fn forward(&self, x: SparseTensor) -> SparseTensor {
         self.conv.forward_norm(x, &self.norm, Epilogue::Relu)
     }
@@ -74,8 +86,10 @@ impl DeconvBnRelu {
 /// Configuration of a [`ResidualBlock`].
 #[derive(Config, Debug)]
 pub struct ResidualBlockConfig {
+    /// Input and output channels.
     pub channels: [usize; 2],
     #[config(default = 3)]
+    /// Kernel size.
     pub kernel_size: usize,
 }
 
@@ -83,21 +97,29 @@ pub struct ResidualBlockConfig {
 /// the channels match, else a 1×1×1 conv → BN.
 #[derive(Module, Debug)]
 pub struct ResidualBlock {
+    /// First 3×3×3 convolution.
     pub conv1: SubmanifoldConv3d,
+    /// Its batch norm.
     pub norm1: SparseBatchNorm,
+    /// Second 3×3×3 convolution.
     pub conv2: SubmanifoldConv3d,
+    /// Its batch norm (the ReLU follows the sum).
     pub norm2: SparseBatchNorm,
+    /// 1×1 convolution and batch norm when the channels change; identity otherwise.
     pub shortcut: Option<Shortcut>,
 }
 
 /// The projection shortcut of a [`ResidualBlock`] whose channels change: 1×1×1 conv → BN.
 #[derive(Module, Debug)]
 pub struct Shortcut {
+    /// The 1×1×1 convolution.
     pub conv: SubmanifoldConv3d,
+    /// Its batch norm.
     pub norm: SparseBatchNorm,
 }
 
 impl ResidualBlockConfig {
+    /// A module with fresh parameters on `device`.
     pub fn init(&self, device: &Device) -> ResidualBlock {
         let [c_in, c_out] = self.channels;
         let k = self.kernel_size;
@@ -115,6 +137,7 @@ impl ResidualBlockConfig {
 }
 
 impl ResidualBlock {
+    /// Applies the module to `x`'s features, on `x`'s coordinates (or the level it maps to).
     pub fn forward(&self, x: SparseTensor) -> SparseTensor {
         let main = self.conv1.forward_norm(x.clone(), &self.norm1, Epilogue::Relu);
         let skip = match &self.shortcut {

@@ -33,6 +33,7 @@ pub struct SubmanifoldConv3dConfig {
 pub struct SubmanifoldConv3d {
     /// `[K, C_in, C_out]`, offsets x-major (see [`crate::KernelMap::submanifold`]).
     pub weight: Param<Tensor<3>>,
+    /// Kernel size.
     pub kernel_size: usize,
 }
 
@@ -57,6 +58,7 @@ fn then_norm(norm: &SparseBatchNorm, epilogue: Epilogue) -> impl Fn(Tensor<2>, T
 }
 
 impl SubmanifoldConv3d {
+    /// Applies the module to `x`'s features, on `x`'s coordinates (or the level it maps to).
     pub fn forward(&self, x: SparseTensor) -> SparseTensor {
         self.run(x, &|x, w, map| sparse_conv(x, w, map))
     }
@@ -79,6 +81,7 @@ impl SubmanifoldConv3d {
 /// Configuration of a [`SparseConv3d`].
 #[derive(Config, Debug)]
 pub struct SparseConv3dConfig {
+    /// Input and output channels.
     pub channels: [usize; 2],
     /// Kernel size, equal to the stride (2 in the network).
     #[config(default = 2)]
@@ -88,7 +91,9 @@ pub struct SparseConv3dConfig {
 /// Strided down-sampling convolution (kernel = stride): each coarse voxel sums its children.
 #[derive(Module, Debug)]
 pub struct SparseConv3d {
+    /// Weights `[K, C_in, C_out]`, one matrix per kernel offset.
     pub weight: Param<Tensor<3>>,
+    /// Kernel size.
     pub kernel_size: usize,
 }
 
@@ -103,6 +108,7 @@ impl SparseConv3dConfig {
 }
 
 impl SparseConv3d {
+    /// Applies the module to `x`'s features, on `x`'s coordinates (or the level it maps to).
     pub fn forward(&self, x: SparseTensor) -> SparseTensor {
         self.run(x, &|x, w, map| sparse_conv(x, w, map))
     }
@@ -122,8 +128,10 @@ impl SparseConv3d {
 /// Configuration of a [`SparseConvTranspose3d`].
 #[derive(Config, Debug)]
 pub struct SparseConvTranspose3dConfig {
+    /// Input and output channels.
     pub channels: [usize; 2],
     #[config(default = 2)]
+    /// Kernel size.
     pub kernel_size: usize,
 }
 
@@ -131,7 +139,9 @@ pub struct SparseConvTranspose3dConfig {
 /// outputs land exactly on the finer level's voxels (spec §1.7).
 #[derive(Module, Debug)]
 pub struct SparseConvTranspose3d {
+    /// Weights `[K, C_in, C_out]`, one matrix per kernel offset.
     pub weight: Param<Tensor<3>>,
+    /// Kernel size.
     pub kernel_size: usize,
 }
 
@@ -146,6 +156,7 @@ impl SparseConvTranspose3dConfig {
 }
 
 impl SparseConvTranspose3d {
+    /// Applies the module to `x`'s features, on `x`'s coordinates (or the level it maps to).
     pub fn forward(&self, x: SparseTensor) -> SparseTensor {
         self.run(x, &|x, w, map| sparse_conv(x, w, map))
     }

@@ -10,18 +10,22 @@ use crate::{SparseTensor, sparse_conv};
 /// Configuration of a [`SparseLinear`].
 #[derive(Config, Debug)]
 pub struct SparseLinearConfig {
+    /// Input and output channels.
     pub channels: [usize; 2],
     #[config(default = true)]
+    /// With a bias.
     pub bias: bool,
 }
 
 /// `y = x·W + b` per voxel (a detection head, a 1×1×1 shortcut), PyTorch's default init.
 #[derive(Module, Debug)]
 pub struct SparseLinear {
+    /// Burn's linear layer, applied to every voxel's features.
     pub inner: Linear,
 }
 
 impl SparseLinearConfig {
+    /// A module with fresh parameters on `device`.
     pub fn init(&self, device: &Device) -> SparseLinear {
         let [d_in, d_out] = self.channels;
         SparseLinear { inner: LinearConfig::new(d_in, d_out).with_bias(self.bias).init(device) }
@@ -29,6 +33,7 @@ impl SparseLinearConfig {
 }
 
 impl SparseLinear {
+    /// Applies the module to `x`'s features, on `x`'s coordinates (or the level it maps to).
     pub fn forward(&self, x: SparseTensor) -> SparseTensor {
         let features = per_voxel_linear(&self.inner, &x);
         x.with_features(features)

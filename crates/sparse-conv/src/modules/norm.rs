@@ -16,10 +16,13 @@ use crate::op::sparse_conv;
 /// Configuration of a [`SparseBatchNorm`]; the defaults are PyTorch's `BatchNorm1d` (spec §1.6).
 #[derive(Config, Debug)]
 pub struct SparseBatchNormConfig {
+    /// Channels.
     pub channels: usize,
     #[config(default = 1e-5)]
+    /// ε added to the variance (1e-5).
     pub epsilon: f64,
     #[config(default = 0.1)]
+    /// Momentum of the running statistics (0.1, PyTorch's convention).
     pub momentum: f64,
 }
 
@@ -31,6 +34,7 @@ pub struct SparseBatchNormConfig {
 /// a conv, it runs inside the conv's op ([`Self::after_conv`]).
 #[derive(Module, Debug)]
 pub struct SparseBatchNorm {
+    /// Burn's batch norm: its parameters, running statistics and record.
     pub inner: BatchNorm,
 }
 
@@ -43,6 +47,7 @@ impl SparseBatchNormConfig {
 }
 
 impl SparseBatchNorm {
+    /// Applies the module to `x`'s features, on `x`'s coordinates (or the level it maps to).
     pub fn forward(&self, x: SparseTensor) -> SparseTensor {
         let features = self.features(x.features(), Epilogue::Identity);
         x.with_features(features)

@@ -9,8 +9,11 @@ use crate::parallel::SyncPtr;
 /// The scalars of one step, in the parameter's type.
 #[derive(Debug, Clone, Copy)]
 pub struct AdamScalars<T> {
+    /// Learning rate.
     pub lr: T,
+    /// β₁, the first moment's decay.
     pub beta_1: T,
+    /// β₂, the second moment's decay.
     pub beta_2: T,
     /// λ, 0 without weight decay.
     pub weight_decay: T,

@@ -34,10 +34,15 @@ pub trait Element:
         b: *const Self, rsb: isize, csb: isize,
         beta: Self, c: *mut Self, rsc: isize, csc: isize,
     );
+    /// 0.
     const ZERO: Self;
+    /// 1.
     const ONE: Self;
+    /// The value as f64 (exact for f32 and f64).
     fn to_f64(self) -> f64;
+    /// `v` rounded to this type.
     fn from_f64(v: f64) -> Self;
+    /// Square root.
     fn sqrt(self) -> Self;
 
     /// [`weight_grad`](super::weight_grad) by a kernel specific to this type and CPU, where one runs.
