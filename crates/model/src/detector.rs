@@ -9,14 +9,18 @@ use data_jrdb::{Batch, Box3d};
 /// weighted, summing to `total`) for training curves.
 #[derive(Debug, Clone)]
 pub struct LossTerms {
+    /// The weighted sum of the terms: what backward runs on.
     pub total: Tensor<1>,
+    /// Each named term, weighted, for the training curves.
     pub terms: Vec<(&'static str, Tensor<1>)>,
 }
 
 /// Detections of one sample of a batch, after post-processing (NMS), best first.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Detections {
+    /// Boxes, best first.
     pub boxes: Vec<Box3d>,
+    /// Their scores in [0, 1].
     pub scores: Vec<f32>,
 }
 

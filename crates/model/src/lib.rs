@@ -12,6 +12,8 @@
 //! - [`post`]: score threshold, NMS, box voting and caps, shared by both.
 //! - [`bench`]: what the `model-bench` binary measures.
 
+#![warn(missing_docs)]
+
 /// Timing and memory of a forward pass and a training step.
 pub mod bench;
 /// The dense CenterPoint-style baseline.

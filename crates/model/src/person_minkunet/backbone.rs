@@ -84,23 +84,31 @@ impl MinkUNetConfig {
 /// Strided conv (k2 s2) → BN → ReLU, then two residual blocks.
 #[derive(Module, Debug)]
 pub struct DownStage {
+    /// The stride-2 convolution.
     pub conv: ConvBnRelu,
+    /// The residual blocks after it.
     pub blocks: Vec<ResidualBlock>,
 }
 
 /// Transposed conv → BN → ReLU, concatenation `[upsampled, skip]`, two residual blocks.
 #[derive(Module, Debug)]
 pub struct UpStage {
+    /// The stride-2 transposed convolution; its output is concatenated with the skip.
     pub deconv: DeconvBnRelu,
+    /// The residual blocks after it.
     pub blocks: Vec<ResidualBlock>,
 }
 
 /// Sparse U-Net: features for every input voxel, computed through four (configurable) levels.
 #[derive(Module, Debug)]
 pub struct MinkUNet {
+    /// The two 3×3×3 convolutions at full resolution.
     pub stem: Vec<SubmanifoldConv3d>,
+    /// Their batch norms.
     pub stem_norms: Vec<SparseBatchNorm>,
+    /// Encoder stages, finest first.
     pub down: Vec<DownStage>,
+    /// Decoder stages, coarsest first.
     pub up: Vec<UpStage>,
 }
 
