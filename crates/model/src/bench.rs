@@ -12,7 +12,8 @@ use sparse_conv::burn::module::Module;
 use sparse_conv::FusedAdamConfig;
 use sparse_conv::burn::optim::GradientsParams;
 use sparse_conv::burn::tensor::Device;
-use sparse_conv::{Coord, scene};
+use sparse_conv::Coord;
+use sparse_conv::bench::scene;
 
 use crate::config::ModelConfig;
 use crate::detector::Detector;
@@ -89,7 +90,8 @@ pub struct BenchReport {
     pub runs: usize,
 }
 
-pub use sparse_conv::timing::{KernelTimes, median_ms, peak_rss_mb};
+pub use sparse_conv::bench::timing::{median_ms, peak_rss_mb};
+pub use sparse_conv::profile::KernelTimes;
 
 /// Where a training step's time goes, mean per step.
 #[derive(Debug, Clone, Copy, Serialize)]

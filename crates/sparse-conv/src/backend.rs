@@ -23,7 +23,7 @@ use crate::kernels::cpu::{self, Element, PairDirection};
 use crate::kernels::cpu::norm as cpu_norm;
 use crate::kernels::cube;
 use crate::geometry::kernel_map::KernelMap;
-use crate::timing::{Kernel, count_conv_flops, in_kernel};
+use crate::profile::{Kernel, count_conv_flops, in_kernel};
 
 /// A backend that can run the sparse convolution of a [`KernelMap`].
 ///

@@ -24,7 +24,7 @@ use burn_cubecl::CubeBackend;
 
 use crate::backend::{Host, on_host};
 use crate::kernels::cpu::norm as cpu_norm;
-use crate::timing::{Kernel, in_kernel};
+use crate::profile::{Kernel, in_kernel};
 
 /// A backend that runs batch norm (+ ReLU) over `[rows, C]` features in a few passes.
 ///

@@ -16,15 +16,16 @@
 //! - [`output_grad`]: a backward pass from a given output gradient ([`backward_from`]).
 //! - [`tensor`]: [`SparseTensor`], features with coordinates and a shared map cache.
 //! - [`modules`]: convolutions, batch norm, linear and U-Net blocks.
-//! - [`scene`]: voxel scenes for benchmarks (a synthetic LiDAR-like scene, `.npy` files).
+//! - [`profile`]: the kernels' own time and operation counters.
+//! - [`bench`]: what the benchmark binaries use: voxel scenes, timing helpers.
 //! - [`heap`]: the binaries' malloc policy (freed tensor memory stays in the process).
-//! - [`timing`]: medians and peak memory for the benchmark binaries.
 //! - [`wgpu_device`]: the wgpu device on the platform's native graphics API (never OpenGL).
 
 #![warn(missing_docs)]
 
 pub mod adam;
 pub mod backend;
+pub mod bench;
 pub mod batch_norm;
 pub mod concat;
 pub mod conv_norm;
@@ -35,10 +36,9 @@ pub mod modules;
 pub mod op;
 pub mod options;
 pub mod output_grad;
+pub mod profile;
 mod parallel;
-pub mod scene;
 pub mod tensor;
-pub mod timing;
 pub mod wgpu_device;
 
 pub use backend::SparseConvBackend;

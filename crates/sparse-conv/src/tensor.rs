@@ -5,7 +5,7 @@ use std::sync::{Arc, Mutex};
 
 use burn::tensor::Tensor;
 
-use crate::timing::{Kernel, in_kernel};
+use crate::profile::{Kernel, in_kernel};
 use crate::geometry::coords::{Coord, CoordError, CoordIndex};
 use crate::geometry::kernel_map::{KernelMap, MapKind};
 

@@ -10,7 +10,7 @@ use clap::{Parser, ValueEnum};
 use model::bench::{KernelTimes, Parts, bench_batch, run};
 use model::{CenterPointConfig, ModelConfig, PersonMinkUNetConfig};
 use sparse_conv::burn::tensor::Device;
-use sparse_conv::scene;
+use sparse_conv::bench::scene;
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 enum Backend {

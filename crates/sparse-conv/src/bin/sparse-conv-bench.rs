@@ -9,9 +9,11 @@ use anyhow::Context;
 use clap::{Parser, ValueEnum};
 use serde::Serialize;
 use sparse_conv::burn::tensor::{Device, Distribution, Tensor};
-use sparse_conv::timing::{self, Timing, median_ms, peak_rss_mb, time_ms};
+use sparse_conv::bench::timing::{Timing, median_ms, peak_rss_mb, time_ms};
+use sparse_conv::profile;
 use sparse_conv::kernels::cpu::{self, PairDirection};
-use sparse_conv::{CoordIndex, KernelMap, backward_from, scene, sparse_conv};
+use sparse_conv::bench::scene;
+use sparse_conv::{CoordIndex, KernelMap, backward_from, sparse_conv};
 
 #[derive(Clone, Copy, Debug, ValueEnum, Serialize)]
 #[serde(rename_all = "lowercase")]
@@ -253,7 +255,7 @@ fn measure(args: &Args, scene_coords: &[sparse_conv::Coord]) -> anyhow::Result<R
         let grad_coarse = Tensor::<2>::random([coarse.len(), c], Distribution::Uniform(-1.0, 1.0), &ad);
         let grad_fine = Tensor::<2>::random([n, c], Distribution::Uniform(-1.0, 1.0), &ad);
         let calls = args.warmup + args.runs;
-        let before = timing::KernelTimes::now();
+        let before = profile::KernelTimes::now();
         let down_fwd_bwd_ms = median_ms(args.warmup, args.runs, || {
             let (map, _) = KernelMap::down(&coords, 2, 1).expect("validated coordinates");
             let out = sparse_conv(x.clone(), w.clone(), &Arc::new(map));
@@ -262,10 +264,10 @@ fn measure(args: &Args, scene_coords: &[sparse_conv::Coord]) -> anyhow::Result<R
             ad.sync().expect("device sync");
             std::hint::black_box(g);
         });
-        let down_kernels_ms = timing::KernelTimes::now().per_run_since(&before, calls).total_ms();
+        let down_kernels_ms = profile::KernelTimes::now().per_run_since(&before, calls).total_ms();
         let up = Arc::new(down.transposed());
         let xc = Tensor::<2>::random([coarse.len(), c], Distribution::Uniform(-1.0, 1.0), &ad).require_grad();
-        let before = timing::KernelTimes::now();
+        let before = profile::KernelTimes::now();
         let up_fwd_bwd_ms = median_ms(args.warmup, args.runs, || {
             let out = sparse_conv(xc.clone(), w.clone(), &up);
             let grads = backward_from(out, grad_fine.clone());
@@ -273,7 +275,7 @@ fn measure(args: &Args, scene_coords: &[sparse_conv::Coord]) -> anyhow::Result<R
             ad.sync().expect("device sync");
             std::hint::black_box(g);
         });
-        let up_kernels_ms = timing::KernelTimes::now().per_run_since(&before, calls).total_ms();
+        let up_kernels_ms = profile::KernelTimes::now().per_run_since(&before, calls).total_ms();
         strided.push(Strided { channels: c, down_fwd_bwd_ms, up_fwd_bwd_ms, down_kernels_ms, up_kernels_ms });
     }
     let mut scaling = Vec::new();

@@ -36,7 +36,7 @@ use burn_cubecl::{CubeBackend, CubeDevice};
 
 use crate::geometry::kernel_map::{KernelMap, NeighborTable};
 use crate::geometry::row_tiles::RowTiles;
-use crate::timing::{Kernel, in_kernel};
+use crate::profile::{Kernel, in_kernel};
 
 /// Rows of a gather tile.
 const TILE_ROWS: usize = 64;
