@@ -31,6 +31,7 @@ pub mod concat;
 pub mod conv_norm;
 pub mod geometry;
 pub mod heap;
+mod host;
 pub mod kernels;
 pub mod modules;
 pub mod op;
