@@ -11,6 +11,9 @@
 //!   targets, loss, decoding, config).
 //! - [`post`]: score threshold, NMS, box voting and caps, shared by both.
 //! - [`bench`]: what the `model-bench` binary measures.
+//!
+//! A trained model on point clouds of your own: `train::RunDetector` loads a run folder (config
+//! and checkpoint) once and detects in `[x, y, z]` arrays (`crates/train/examples/detect_points.rs`).
 
 #![warn(missing_docs)]
 

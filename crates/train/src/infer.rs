@@ -12,16 +12,15 @@
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
-use anyhow::{Context, Result};
-use burn::tensor::Device;
+use anyhow::Result;
 use data_jrdb::Split;
 use eval::jrdb::{DetectionFile, write_detections};
 use eval::kitti::FileKind;
-use model::{Detector, ModelConfig};
 use serde_json::json;
 
-use crate::backend::{BackendKind, init_threads};
-use crate::checkpoint::{CheckpointFiles, Checkpoints, Slot};
+use crate::backend::BackendKind;
+use crate::checkpoint::Slot;
+use crate::detector::RunDetector;
 use crate::data::{ensure_dataset, eval_loader};
 use crate::render::render_frames;
 use crate::run_dir::RunDir;
@@ -87,29 +86,19 @@ pub fn infer(run: &RunDir, opts: &InferOptions) -> Result<InferOutput> {
     if let Some(b) = opts.backend {
         cfg.backend = b;
     }
-    init_threads(cfg.threads)?;
-    cfg.kernels.apply();
     let slot = opts.checkpoint.unwrap_or(Slot::Latest);
-    let files = Checkpoints::new(run.checkpoints()).get(slot)?.with_context(|| format!("{} has no {slot:?} checkpoint", run.root.display()))?;
-    let device = cfg.backend.device()?;
-    match &cfg.model {
-        ModelConfig::PersonMinkunet(c) => infer_model(c.init(&device), &files, run, &cfg, opts, &device),
-        ModelConfig::Centerpoint(c) => infer_model(c.init(&device), &files, run, &cfg, opts, &device),
-    }
-}
-
-fn infer_model<D: Detector>(model: D, files: &CheckpointFiles, run: &RunDir, cfg: &RunConfig, opts: &InferOptions, device: &Device) -> Result<InferOutput> {
-    let model = files.load_model(model)?.valid();
+    let detector = RunDetector::with_config(&run.root, cfg, slot, None)?;
+    let cfg = detector.config().clone();
     ensure_dataset(&cfg.data)?;
-    let loader = eval_loader(cfg, opts.split)?;
-    let frames = detect_split(&model, &loader, device, opts.verbose)?;
+    let loader = eval_loader(&cfg, opts.split)?;
+    let frames = detect_split(|b| detector.detect_batch(b), &loader, opts.verbose)?;
     let dir = opts.out.clone().unwrap_or_else(|| run.detections(split_name(opts.split)));
     let protocol = cfg.eval.protocol();
     let (report, by_range) = write_results(&frames, &dir, &protocol)?;
     let heading = HeadingError::of(&frames, &protocol);
     let mut eval_json = report.to_json();
     if let Some(obj) = eval_json.as_object_mut() {
-        obj.insert("checkpoint".into(), json!(files.dir.file_name().map(|n| n.to_string_lossy().into_owned())));
+        obj.insert("checkpoint".into(), json!(detector.checkpoint().file_name().map(|n| n.to_string_lossy().into_owned())));
         obj.insert("split".into(), json!(split_name(opts.split)));
         obj.insert("data_root".into(), json!(cfg.data.root));
         let bands: serde_json::Map<String, serde_json::Value> = RANGE_BANDS

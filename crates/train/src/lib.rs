@@ -6,7 +6,8 @@
 //!   wgpu; threads), [`data`] (simulated data on first use, splits, loaders);
 //! - a run: [`run_dir`] (the folder), [`trainer`] (the loop), [`validate`] (AP3D with `eval`),
 //!   [`checkpoint`] (atomic best/latest, resume), [`metrics`] (CSV), [`plots`] (PNG), [`progress`];
-//! - after a run: [`infer`] (detection files, official layout, scores), [`render`] (BEV PNGs);
+//! - after a run: [`detector`] ([`RunDetector`]: a run's model on point clouds), [`infer`]
+//!   (detection files, official layout, scores), [`render`] (BEV PNGs);
 //! - many runs: [`sweep`].
 //!
 //! The binary (`cargo run -p train -- --help`) wraps [`trainer::train`], [`infer::infer`] and
@@ -21,6 +22,8 @@ pub mod checkpoint;
 pub mod config;
 /// Datasets and loaders of a run.
 pub mod data;
+/// A trained detector loaded from a run folder, applied to point clouds.
+pub mod detector;
 /// Detection files and scores from a checkpoint.
 pub mod infer;
 /// CSV curves.
@@ -45,6 +48,7 @@ pub mod validate;
 pub use backend::BackendKind;
 pub use checkpoint::{Checkpoints, Slot, TrainState};
 pub use config::RunConfig;
+pub use detector::RunDetector;
 pub use infer::{InferOptions, InferOutput, infer};
 pub use run_dir::{Existing, RunDir};
 pub use schedule::Schedule;

@@ -5,12 +5,12 @@ use std::time::Instant;
 
 use anyhow::Result;
 use burn::tensor::Device;
-use data_jrdb::{Box3d, Loader, stats};
+use data_jrdb::{Batch, Box3d, Loader, stats};
 use eval::jrdb::{Detection, detections_to_kitti};
 use eval::kitti::KittiObject;
 use eval::{Frame, Protocol, Report};
 use indicatif::ProgressBar;
-use model::Detector;
+use model::{Detections, Detector};
 
 use crate::progress;
 
@@ -118,14 +118,14 @@ pub struct Validation {
     pub seconds: f64,
 }
 
-/// Runs `model` (in eval mode: pass `model.valid()`) over every batch of `loader`'s epoch 0 on
-/// `device` (a plain, non-autodiff device).
-pub fn detect_split<D: Detector>(model: &D, loader: &Loader, device: &Device, show_progress: bool) -> Result<Vec<FrameResult>> {
+/// Runs `detect` (a model in eval mode on a plain device, or a [`crate::RunDetector`]) over every
+/// batch of `loader`'s epoch 0.
+pub fn detect_split(detect: impl Fn(&Batch) -> Vec<Detections>, loader: &Loader, show_progress: bool) -> Result<Vec<FrameResult>> {
     let pb = if show_progress { progress::bar(loader.dataset().len() as u64, "detect") } else { ProgressBar::hidden() };
     let mut out = Vec::with_capacity(loader.dataset().len());
     for batch in loader.epoch(0) {
         let batch = batch?;
-        let dets = model.detect(&batch, device);
+        let dets = detect(&batch);
         anyhow::ensure!(dets.len() == batch.len(), "the model returned {} detection lists for a batch of {}", dets.len(), batch.len());
         for (b, d) in dets.into_iter().enumerate() {
             let (sequence, name) = batch.frames[b].clone();
@@ -169,7 +169,7 @@ pub fn format_by_range(by_range: &[[f64; 3]; 3]) -> String {
 /// Detects and scores a split.
 pub fn validate<D: Detector>(model: &D, loader: &Loader, device: &Device, protocol: &Protocol, show_progress: bool) -> Result<Validation> {
     let t0 = Instant::now();
-    let frames = detect_split(model, loader, device, show_progress)?;
+    let frames = detect_split(|b| model.detect(b, device), loader, show_progress)?;
     let eval_frames = to_eval_frames(&frames);
     let report = Report::compute(&eval_frames, protocol);
     let ap3d = [report.ap3d[0].ap, report.ap3d[1].ap, report.ap3d[2].ap];
