@@ -2,7 +2,7 @@
 //! simulator that writes JRDB-format trees.
 //!
 //! Crate map:
-//! - files: [`pcd`] (+ [`lzf`]), [`labels`], [`calibration`], [`timestamps`], [`split`] (layout and
+//! - files: [`pcd`] (+ [`lzf`]), [`cloud`] (PCD, KITTI `.bin`, `.npy` for detection), [`labels`], [`calibration`], [`timestamps`], [`split`] (layout and
 //!   splits), [`dataset`] (`JrdbDataset`, `Frame`);
 //! - settings: [`config`] (`DataConfig`, the `[data]` table a run embeds);
 //! - batches: [`augment`] → [`voxelize`] → [`batch`] (`Sample`, `Batch`), driven by [`loader`];
@@ -14,6 +14,8 @@
 pub mod augment;
 /// Frames to samples to batches.
 pub mod batch;
+/// Point clouds from files other tools write (PCD, KITTI `.bin`, NumPy `.npy`).
+pub mod cloud;
 /// The workspace's box type and its convention.
 pub mod box3d;
 /// LiDAR → base-frame transforms of `defaults.yaml`.
@@ -50,6 +52,7 @@ pub use augment::{AugmentConfig, Augmentation};
 pub use batch::{Batch, Sample, SampleConfig, collate, prepare};
 pub use box3d::Box3d;
 pub use calibration::{Calibration, Lidar};
+pub use cloud::{Cloud, CloudFormat, parse_cloud, read_cloud};
 pub use config::{AugmentSection, DataConfig};
 pub use dataset::{DatasetConfig, Frame, JrdbDataset, OnBadFrame};
 pub use error::{DataError, ErrorKind, Result};

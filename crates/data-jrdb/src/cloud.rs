@@ -1,0 +1,205 @@
+//! Point clouds as other tools write them, read into `[x, y, z]` points: PCD (any of its three
+//! encodings, extra fields skipped), KITTI's velodyne `.bin` (float32 x, y, z, intensity) and
+//! NumPy `.npy` (N×3 or N×4, float32 or float64, little-endian). Points with a non-finite coordinate are dropped
+//! and counted. The format comes from the bytes where they carry a signature (PCD's header,
+//! NPY's magic), else from the file's extension.
+
+use std::path::Path;
+
+use crate::error::{DataError, ErrorKind, Result};
+use crate::pcd::{NonFinite, parse_pcd};
+
+/// A point-cloud file format.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CloudFormat {
+    /// PCD: ascii, binary or binary_compressed.
+    Pcd,
+    /// KITTI velodyne: little-endian float32 records of x, y, z, intensity.
+    KittiBin,
+    /// NumPy `.npy`: a 2-D float32 or float64 array of 3 or 4 columns.
+    Npy,
+}
+
+impl CloudFormat {
+    /// The format a file's name says (`.pcd`, `.bin`, `.npy`, any case).
+    pub fn from_extension(path: &Path) -> Option<Self> {
+        match path.extension()?.to_str()?.to_ascii_lowercase().as_str() {
+            "pcd" => Some(Self::Pcd),
+            "bin" => Some(Self::KittiBin),
+            "npy" => Some(Self::Npy),
+            _ => None,
+        }
+    }
+
+    /// The format the bytes announce: NPY's magic, or a PCD header's first keyword. A `.bin`
+    /// has no signature.
+    pub fn sniff(bytes: &[u8]) -> Option<Self> {
+        if bytes.starts_with(b"\x93NUMPY") {
+            return Some(Self::Npy);
+        }
+        let head = &bytes[..bytes.len().min(64)];
+        let text = String::from_utf8_lossy(head);
+        let first = text.lines().map(str::trim).find(|l| !l.is_empty() && !l.starts_with('#'));
+        let commented_pcd = text.trim_start().starts_with("# .PCD");
+        (commented_pcd || first.is_some_and(|l| l.starts_with("VERSION") || l.starts_with("FIELDS"))).then_some(Self::Pcd)
+    }
+}
+
+/// A cloud read from a file or a buffer.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Cloud {
+    /// The finite points, in the file's frame and order.
+    pub points: Vec<[f32; 3]>,
+    /// Points dropped for a non-finite coordinate.
+    pub dropped_non_finite: usize,
+    /// The format it was read as.
+    pub format: CloudFormat,
+}
+
+/// Reads a cloud file: the format from its bytes where they say, else from its extension.
+pub fn read_cloud(path: &Path) -> Result<Cloud> {
+    let bytes = std::fs::read(path).map_err(|e| DataError::io(path, e))?;
+    let format = CloudFormat::sniff(&bytes).or_else(|| CloudFormat::from_extension(path)).ok_or_else(|| {
+        DataError::new(path, ErrorKind::Layout("not a point cloud this reads: no PCD header or NPY magic, and not named .pcd, .bin or .npy".into()))
+    })?;
+    parse_cloud(&bytes, format).map_err(|kind| DataError::new(path, kind))
+}
+
+/// Parses a cloud from bytes in `format`.
+pub fn parse_cloud(bytes: &[u8], format: CloudFormat) -> std::result::Result<Cloud, ErrorKind> {
+    let (raw, dropped_pcd) = match format {
+        CloudFormat::Pcd => {
+            let pcd = parse_pcd(bytes, NonFinite::Drop)?;
+            (pcd.xyz, pcd.dropped_non_finite)
+        }
+        CloudFormat::KittiBin => (kitti_bin(bytes)?, 0),
+        CloudFormat::Npy => (npy(bytes)?, 0),
+    };
+    let before = raw.len();
+    let points: Vec<[f32; 3]> = raw.into_iter().filter(|p| p.iter().all(|v| v.is_finite())).collect();
+    Ok(Cloud { dropped_non_finite: dropped_pcd + before - points.len(), points, format })
+}
+
+fn kitti_bin(bytes: &[u8]) -> std::result::Result<Vec<[f32; 3]>, ErrorKind> {
+    const RECORD: usize = 16;
+    if bytes.len() % RECORD != 0 {
+        return Err(ErrorKind::Mismatch(format!(
+            "a KITTI .bin holds records of 4 float32 (16 bytes); {} bytes is {} records and {} bytes over",
+            bytes.len(),
+            bytes.len() / RECORD,
+            bytes.len() % RECORD
+        )));
+    }
+    let f = |b: &[u8]| f32::from_le_bytes([b[0], b[1], b[2], b[3]]);
+    Ok(bytes.chunks_exact(RECORD).map(|r| [f(&r[0..4]), f(&r[4..8]), f(&r[8..12])]).collect())
+}
+
+/// NumPy's `.npy` (format versions 1–3): the magic, a header length, a Python-literal header
+/// `{'descr': '<f4', 'fortran_order': False, 'shape': (N, 3), }`, then the data.
+fn npy(bytes: &[u8]) -> std::result::Result<Vec<[f32; 3]>, ErrorKind> {
+    let bad = |what: String| ErrorKind::Mismatch(format!("NPY: {what}"));
+    let header_error = |what: &str| ErrorKind::Parse(format!("NPY header: {what}"));
+    if !bytes.starts_with(b"\x93NUMPY") || bytes.len() < 10 {
+        return Err(header_error("no NPY magic"));
+    }
+    let (len, start) = match bytes[6] {
+        1 => (u16::from_le_bytes([bytes[8], bytes[9]]) as usize, 10),
+        2 | 3 if bytes.len() >= 12 => (u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize, 12),
+        v => return Err(header_error(&format!("format version {v} is not one of 1, 2, 3"))),
+    };
+    let header = bytes.get(start..start + len).ok_or_else(|| header_error("shorter than its stated length"))?;
+    let header = std::str::from_utf8(header).map_err(|_| header_error("not text"))?;
+    let value = |key: &str| -> std::result::Result<&str, ErrorKind> {
+        let at = header.find(&format!("'{key}'")).ok_or_else(|| header_error(&format!("no '{key}'")))?;
+        let rest = header[at + key.len() + 2..].trim_start().strip_prefix(':').ok_or_else(|| header_error(&format!("'{key}' has no value")))?;
+        Ok(rest.trim_start())
+    };
+    let descr = value("descr")?;
+    let descr = descr.strip_prefix('\'').and_then(|d| d.split('\'').next()).ok_or_else(|| header_error("'descr' is not a string"))?;
+    if value("fortran_order")?.starts_with("True") {
+        return Err(bad("column-major (Fortran-order) arrays are not read; save with np.ascontiguousarray".into()));
+    }
+    let shape = value("shape")?;
+    let shape = shape.strip_prefix('(').and_then(|s| s.split(')').next()).ok_or_else(|| header_error("'shape' is not a tuple"))?;
+    let dims: Vec<usize> = shape.split(',').map(str::trim).filter(|d| !d.is_empty()).map(|d| d.parse().map_err(|_| header_error(&format!("shape entry `{d}`")))).collect::<std::result::Result<_, _>>()?;
+    let [n, c] = dims[..] else { return Err(bad(format!("expected a 2-D array (N×3 or N×4), got shape {dims:?}"))) };
+    if c != 3 && c != 4 {
+        return Err(bad(format!("expected 3 (x, y, z) or 4 (x, y, z, intensity) columns, got {c}")));
+    }
+    let size = match descr {
+        "<f4" | "=f4" => 4,
+        "<f8" | "=f8" => 8,
+        other => return Err(bad(format!("dtype `{other}`; expected little-endian float32 (<f4) or float64 (<f8)"))),
+    };
+    let data = &bytes[start + len..];
+    if data.len() != n * c * size {
+        return Err(ErrorKind::Truncated(format!("NPY data has {} bytes, its shape {n}×{c} of {size}-byte floats needs {}", data.len(), n * c * size)));
+    }
+    let at = |i: usize| -> f32 {
+        let b = &data[i * size..(i + 1) * size];
+        if size == 4 { f32::from_le_bytes([b[0], b[1], b[2], b[3]]) } else { f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]) as f32 }
+    };
+    Ok((0..n).map(|r| [at(r * c), at(r * c + 1), at(r * c + 2)]).collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An NPY v1 file as NumPy writes it (`np.save`), little-endian, C order.
+    fn npy_bytes(descr: &str, shape: &str, data: &[u8]) -> Vec<u8> {
+        let mut header = format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': {shape}, }}");
+        while (10 + header.len() + 1) % 64 != 0 {
+            header.push(' ');
+        }
+        header.push('\n');
+        let mut out = b"\x93NUMPY\x01\x00".to_vec();
+        out.extend((header.len() as u16).to_le_bytes());
+        out.extend(header.as_bytes());
+        out.extend(data);
+        out
+    }
+
+    #[test]
+    fn every_format_reads_the_same_points() {
+        let pts = [[1.0f32, 2.0, 3.0], [-4.5, 0.25, -0.7], [f32::NAN, 1.0, 1.0]];
+        let bin: Vec<u8> = pts.iter().flat_map(|p| p.iter().chain(&[0.5f32]).flat_map(|v| v.to_le_bytes())).collect();
+        let f4: Vec<u8> = pts.iter().flat_map(|p| p.iter().flat_map(|v| v.to_le_bytes())).collect();
+        let f8x4: Vec<u8> = pts.iter().flat_map(|p| p.iter().chain(&[9.0]).flat_map(|&v| (v as f64).to_le_bytes())).collect();
+        let want = vec![pts[0], pts[1]];
+        for (bytes, format) in [
+            (bin, CloudFormat::KittiBin),
+            (npy_bytes("<f4", "(3, 3)", &f4), CloudFormat::Npy),
+            (npy_bytes("<f8", "(3, 4)", &f8x4), CloudFormat::Npy),
+        ] {
+            let c = parse_cloud(&bytes, format).unwrap();
+            assert_eq!((c.points, c.dropped_non_finite), (want.clone(), 1), "{format:?}");
+        }
+    }
+
+    #[test]
+    fn formats_are_recognised_from_bytes_then_names() {
+        assert_eq!(CloudFormat::sniff(&npy_bytes("<f4", "(0, 3)", &[])), Some(CloudFormat::Npy));
+        assert_eq!(CloudFormat::sniff(b"# .PCD v0.7 - Point Cloud Data\nVERSION 0.7\n"), Some(CloudFormat::Pcd));
+        assert_eq!(CloudFormat::sniff(b"VERSION 0.7\nFIELDS x y z\n"), Some(CloudFormat::Pcd));
+        assert_eq!(CloudFormat::sniff(&[0u8; 32]), None);
+        assert_eq!(CloudFormat::from_extension(Path::new("a/000001.BIN")), Some(CloudFormat::KittiBin));
+        assert_eq!(CloudFormat::from_extension(Path::new("scan.ply")), None);
+    }
+
+    #[test]
+    fn malformed_clouds_say_what_is_wrong() {
+        let e = parse_cloud(&[0u8; 20], CloudFormat::KittiBin).unwrap_err().to_string();
+        assert!(e.contains("16 bytes") && e.contains("4 bytes over"), "{e}");
+        let e = parse_cloud(&npy_bytes("<f4", "(2, 5)", &[0u8; 40]), CloudFormat::Npy).unwrap_err().to_string();
+        assert!(e.contains("got 5"), "{e}");
+        let e = parse_cloud(&npy_bytes("<i4", "(1, 3)", &[0u8; 12]), CloudFormat::Npy).unwrap_err().to_string();
+        assert!(e.contains("float32"), "{e}");
+        let e = parse_cloud(&npy_bytes("<f4", "(3,)", &[0u8; 12]), CloudFormat::Npy).unwrap_err().to_string();
+        assert!(e.contains("2-D"), "{e}");
+        let e = parse_cloud(&npy_bytes("<f4", "(4, 3)", &[0u8; 12]), CloudFormat::Npy).unwrap_err().to_string();
+        assert!(e.contains("NPY"), "{e}");
+        let e = parse_cloud(b"\x93NUMPY\x01", CloudFormat::Npy).unwrap_err().to_string();
+        assert!(e.contains("NPY header"), "{e}");
+    }
+}
