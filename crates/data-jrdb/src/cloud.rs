@@ -67,17 +67,21 @@ pub fn read_cloud(path: &Path) -> Result<Cloud> {
 
 /// Parses a cloud from bytes in `format`.
 pub fn parse_cloud(bytes: &[u8], format: CloudFormat) -> std::result::Result<Cloud, ErrorKind> {
-    let (raw, dropped_pcd) = match format {
+    let finite = |raw: Vec<[f32; 3]>| {
+        let before = raw.len();
+        let points: Vec<[f32; 3]> = raw.into_iter().filter(|p| p.iter().all(|v| v.is_finite())).collect();
+        (before - points.len(), points)
+    };
+    let (dropped_non_finite, points) = match format {
+        // The PCD reader drops them itself.
         CloudFormat::Pcd => {
             let pcd = parse_pcd(bytes, NonFinite::Drop)?;
-            (pcd.xyz, pcd.dropped_non_finite)
+            (pcd.dropped_non_finite, pcd.xyz)
         }
-        CloudFormat::KittiBin => (kitti_bin(bytes)?, 0),
-        CloudFormat::Npy => (npy(bytes)?, 0),
+        CloudFormat::KittiBin => finite(kitti_bin(bytes)?),
+        CloudFormat::Npy => finite(npy(bytes)?),
     };
-    let before = raw.len();
-    let points: Vec<[f32; 3]> = raw.into_iter().filter(|p| p.iter().all(|v| v.is_finite())).collect();
-    Ok(Cloud { dropped_non_finite: dropped_pcd + before - points.len(), points, format })
+    Ok(Cloud { points, dropped_non_finite, format })
 }
 
 fn kitti_bin(bytes: &[u8]) -> std::result::Result<Vec<[f32; 3]>, ErrorKind> {

@@ -68,12 +68,12 @@ pub fn read_labels_3d(path: &Path) -> Result<BTreeMap<String, Vec<Label>>> {
         .collect())
 }
 
-/// The KITTI lines the official converter writes for one frame's labels: pedestrians, in label
-/// order, with `num_points` and `observation_angle` carried over.
+/// The KITTI lines the official converter writes for one frame's labels (the pedestrians
+/// [`read_labels_3d`] keeps), in label order, with `num_points` and `observation_angle` carried
+/// over.
 pub fn labels_to_kitti(labels: &[Label]) -> Vec<KittiObject> {
     labels
         .iter()
-        .filter(|l| l.id.starts_with("pedestrian:"))
         .map(|l| KittiObject::ground_truth(&l.bbox, l.num_points, l.observation_angle))
         .collect()
 }

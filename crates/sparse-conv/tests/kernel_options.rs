@@ -21,12 +21,12 @@ fn both_cpu_kernel_choices_match_the_f64_result() {
     let w = random_values(&mut r, map.volume() * c[0] * c[1]);
     let g = random_values(&mut r, map.n_out() * c[1]);
     // f64 runs the general path whatever the options say: the reference.
-    let reference = conv_outputs_as(&map, &x, &w, &g, c, DType::F64);
+    let reference = conv_outputs_in(&map, &x, &w, &g, c, &Device::flex(), DType::F64);
     let mut outputs = Vec::new();
     for cpu in [CpuKernels::Generic, CpuKernels::Auto] {
         KernelOptions { cpu, ..Default::default() }.apply();
         assert_eq!(KernelOptions::current().cpu, cpu);
-        let got = conv_outputs_as(&map, &x, &w, &g, c, DType::F32);
+        let got = conv_outputs_in(&map, &x, &w, &g, c, &Device::flex(), DType::F32);
         for (name, a, b) in [("output", &got.out, &reference.out), ("input gradient", &got.gx, &reference.gx), ("weight gradient", &got.gw, &reference.gw)] {
             assert_close(a, b, 1e-5, &format!("{cpu:?} {name}"));
         }
@@ -39,14 +39,4 @@ fn both_cpu_kernel_choices_match_the_f64_result() {
     }
     KernelOptions { gpu_tiled_min_cubes: 0, ..Default::default() }.apply();
     assert_eq!(KernelOptions::current(), KernelOptions { cpu: CpuKernels::Auto, gpu_tiled_min_cubes: 0 });
-}
-
-/// `conv_outputs` on flex in `dtype`.
-fn conv_outputs_as(map: &Arc<KernelMap>, x: &[f64], w: &[f64], g: &[f64], c: [usize; 2], dtype: DType) -> ConvOutputs {
-    let ad = Device::flex().autodiff();
-    let xt = tensor2(x, [map.n_in(), c[0]], &ad, dtype).require_grad();
-    let wt = tensor3(w, [map.volume(), c[0], c[1]], &ad, dtype).require_grad();
-    let out = sparse_conv::sparse_conv(xt.clone(), wt.clone(), map);
-    let grads = (out.clone() * tensor2(g, [map.n_out(), c[1]], &ad, dtype)).sum().backward();
-    ConvOutputs { out: values(out), gx: values(xt.grad(&grads).unwrap()), gw: values(wt.grad(&grads).unwrap()) }
 }

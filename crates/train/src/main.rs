@@ -215,14 +215,14 @@ fn main() -> ExitCode {
             }
             if rescore {
                 for j in &jobs {
-                    if train::sweep::finished(&j.dir).is_none() {
-                        eprintln!("{} seed {}: not finished, not rescored", j.variant, j.seed);
-                        continue;
-                    }
                     eprintln!("rescoring {} seed {} ({})", j.variant, j.seed, j.dir.display());
-                    let s = train::sweep::rescore(j, true)?;
-                    if let Some(a) = s.last_ap3d {
-                        eprintln!("  AP3D@0.3/0.5/0.7 {:.1}/{:.1}/{:.1}", 100.0 * a[0], 100.0 * a[1], 100.0 * a[2]);
+                    match train::sweep::rescore(j, true)? {
+                        None => eprintln!("  not finished, not rescored"),
+                        Some(s) => {
+                            if let Some(a) = s.last_ap3d {
+                                eprintln!("  AP3D@0.3/0.5/0.7 {:.1}/{:.1}/{:.1}", 100.0 * a[0], 100.0 * a[1], 100.0 * a[2]);
+                            }
+                        }
                     }
                 }
                 let results = train::sweep::aggregate(&jobs);

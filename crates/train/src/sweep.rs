@@ -184,9 +184,10 @@ pub fn finished(dir: &Path) -> Option<TrainSummary> {
 /// the validation split, as the end of training validates. Every other setting must be the one
 /// it trained with. The run's `config.toml` takes the new settings, its `summary.json` the new
 /// scores, its `detections/val/` the detections; the run's own training record is unchanged.
-pub fn rescore(job: &Job, verbose: bool) -> Result<TrainSummary> {
+/// `None` when the run is not finished (nothing is touched).
+pub fn rescore(job: &Job, verbose: bool) -> Result<Option<TrainSummary>> {
     let run = RunDir::at(&job.dir);
-    let mut summary = finished(&job.dir).with_context(|| format!("{} is not a finished run", job.dir.display()))?;
+    let Some(mut summary) = finished(&job.dir) else { return Ok(None) };
     let mut stored = run.config()?;
     *stored.model.post_mut() = job.config.model.post().clone();
     stored.eval = job.config.eval.clone();
@@ -203,7 +204,7 @@ pub fn rescore(job: &Job, verbose: bool) -> Result<TrainSummary> {
     summary.last_ap3d_by_range = Some(out.ap3d_by_range);
     summary.last_heading = out.heading;
     write_atomic(&run.summary_json(), serde_json::to_string_pretty(&summary)?.as_bytes())?;
-    Ok(summary)
+    Ok(Some(summary))
 }
 
 /// Runs every job not finished yet with `run_job` (which trains into `job.dir`, resuming what is

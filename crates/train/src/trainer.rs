@@ -312,11 +312,10 @@ impl<'a> Session<'a> {
         let done = self.state.epoch + 1;
         let due = (cfg.train.val_every > 0 && done.is_multiple_of(cfg.train.val_every)) || done == epochs || done == self.stop_epochs;
         let val = if due { Some(validate(&model.valid(), &self.val_loader, device, &cfg.eval.protocol(), self.opts.verbose)?) } else { None };
-        let state = &mut self.state;
+        let state = &self.state;
         let steps_in_epoch = state.batch.max(1) as f64;
-        let sums = state.epoch_sums.clone();
-        let mean = |k: &str| sums.iter().find(|(n, _)| n == k).map(|(_, s)| s / steps_in_epoch);
-        let names: Vec<String> = sums.iter().map(|(n, _)| n.clone()).filter(|n| n != "loss").collect();
+        let mean = |k: &str| state.epoch_sums.iter().find(|(n, _)| n == k).map(|(_, s)| s / steps_in_epoch);
+        let names: Vec<String> = state.epoch_sums.iter().map(|(n, _)| n.clone()).filter(|n| n != "loss").collect();
         let lr_end = cfg.train.schedule.lr(done as f64, epochs);
         let mut row = vec![done.to_string(), state.step.to_string(), field(Some(lr_end)), field(mean("loss"))];
         row.extend(names.iter().map(|n| field(mean(n))));
@@ -341,6 +340,7 @@ impl<'a> Session<'a> {
             self.last_by_range = Some(v.ap3d_by_range);
             self.last_heading = v.heading;
         }
+        let state = &mut self.state;
         state.epoch = done;
         state.batch = 0;
         state.epoch_sums.clear();

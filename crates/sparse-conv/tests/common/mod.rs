@@ -254,13 +254,18 @@ pub struct ConvOutputs {
     pub gw: Vec<f64>,
 }
 
-/// `sparse_conv` on `device` with the loss `Σ out · g`: its output and gradients.
+/// `sparse_conv` on `device` in f32 with the loss `Σ out · g`: its output and gradients.
 pub fn conv_outputs(map: &Arc<KernelMap>, x: &[f64], w: &[f64], g: &[f64], c: [usize; 2], device: &Device) -> ConvOutputs {
+    conv_outputs_in(map, x, w, g, c, device, DType::F32)
+}
+
+/// [`conv_outputs`] in `dtype`.
+pub fn conv_outputs_in(map: &Arc<KernelMap>, x: &[f64], w: &[f64], g: &[f64], c: [usize; 2], device: &Device, dtype: DType) -> ConvOutputs {
     let ad = device.clone().autodiff();
-    let xt = tensor2(x, [map.n_in(), c[0]], &ad, DType::F32).require_grad();
-    let wt = tensor3(w, [map.volume(), c[0], c[1]], &ad, DType::F32).require_grad();
+    let xt = tensor2(x, [map.n_in(), c[0]], &ad, dtype).require_grad();
+    let wt = tensor3(w, [map.volume(), c[0], c[1]], &ad, dtype).require_grad();
     let out = sparse_conv(xt.clone(), wt.clone(), map);
-    let grads = (out.clone() * tensor2(g, [map.n_out(), c[1]], &ad, DType::F32)).sum().backward();
+    let grads = (out.clone() * tensor2(g, [map.n_out(), c[1]], &ad, dtype)).sum().backward();
     ConvOutputs { out: values(out), gx: values(xt.grad(&grads).unwrap()), gw: values(wt.grad(&grads).unwrap()) }
 }
 

@@ -204,15 +204,17 @@ impl<'a, T: Element> ConvEpilogue<'a, T> {
         let (a, b, _) = affine(stats, gamma, beta, epsilon);
         ConvEpilogue { a, b, relu, residual }
     }
+}
 
+impl<T: Element> RowEpilogue<T> for ConvEpilogue<'_, T> {
     /// Channels of the rows it applies to.
-    pub fn channels(&self) -> usize {
+    fn channels(&self) -> usize {
         self.a.len()
     }
 
     /// Applies to a whole output, in parallel chunks of rows: for paths that finish every row
     /// before any can take the epilogue.
-    pub fn apply_all(&self, out: &mut [T]) {
+    fn apply_all(&self, out: &mut [T]) {
         let c = self.channels();
         if c > 0 {
             out.par_chunks_mut(CHUNK_ROWS * c).enumerate().for_each(|(chunk, rows)| self.apply(chunk * CHUNK_ROWS, rows));
@@ -220,7 +222,7 @@ impl<'a, T: Element> ConvEpilogue<'a, T> {
     }
 
     /// Applies to whole rows, the first of which is output row `first`.
-    pub fn apply(&self, first: usize, rows: &mut [T]) {
+    fn apply(&self, first: usize, rows: &mut [T]) {
         let c = self.a.len();
         let (a, b) = (&self.a[..c], &self.b[..c]);
         match self.residual {
@@ -242,18 +244,6 @@ impl<'a, T: Element> ConvEpilogue<'a, T> {
                 }
             }
         }
-    }
-}
-
-impl<T: Element> RowEpilogue<T> for ConvEpilogue<'_, T> {
-    fn channels(&self) -> usize {
-        ConvEpilogue::channels(self)
-    }
-    fn apply(&self, first: usize, rows: &mut [T]) {
-        ConvEpilogue::apply(self, first, rows)
-    }
-    fn apply_all(&self, out: &mut [T]) {
-        ConvEpilogue::apply_all(self, out)
     }
 }
 
