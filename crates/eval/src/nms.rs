@@ -98,12 +98,18 @@ impl Grid {
     }
 }
 
-/// Box voting after NMS: every candidate above `score_threshold` votes, with its score as
-/// weight, for the kept box (`kept`, indices into `boxes`) whose centre is nearest in BEV if that
+/// `a` in (−π, π], the range every decoded heading lies in.
+fn wrap_angle(a: f64) -> f64 {
+    let r = a.rem_euclid(std::f64::consts::TAU);
+    if r > std::f64::consts::PI { r - std::f64::consts::TAU } else { r }
+}
+
+/// Box voting after NMS: every candidate above `score_threshold` votes, with its score raised to
+/// `power` as weight (1: the score itself), for the kept box (`kept`, indices into `boxes`) whose centre is nearest in BEV if that
 /// lies within `radius`; a kept box becomes the weighted mean of its voters' centres and sizes
 /// (it votes for itself, so it always has one). With `axis`, its heading becomes the weighted
 /// mean axis of the voters' headings (the mean of `(cos 2θ, sin 2θ)`: votes π apart agree),
-/// turned to the side of its own heading; without, it keeps its own.
+/// turned to the side of its own heading (in (−π, π]); without, it keeps its own.
 pub fn vote<S: Copy + Into<f64>>(
     boxes: &[Box3d],
     scores: &[S],
@@ -111,6 +117,7 @@ pub fn vote<S: Copy + Into<f64>>(
     radius: f64,
     score_threshold: f64,
     axis: bool,
+    power: f64,
 ) -> Vec<Box3d> {
     let mut grid = Grid::new(radius);
     for (slot, &i) in kept.iter().enumerate() {
@@ -123,6 +130,7 @@ pub fn vote<S: Copy + Into<f64>>(
         if s.is_nan() || s <= score_threshold {
             continue;
         }
+        let s = if power == 1.0 { s } else { s.powf(power) };
         let nearest = grid
             .near(b)
             .map(|slot| {
@@ -150,7 +158,7 @@ pub fn vote<S: Copy + Into<f64>>(
                 let phi = 0.5 * acc[8].atan2(acc[7]);
                 // φ or φ + π, whichever is nearer the kept box's heading, in the same turn as it.
                 let half = std::f64::consts::FRAC_PI_2;
-                own + ((phi - own + half).rem_euclid(std::f64::consts::PI) - half)
+                wrap_angle(own + ((phi - own + half).rem_euclid(std::f64::consts::PI) - half))
             } else {
                 own
             };

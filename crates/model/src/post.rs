@@ -53,6 +53,9 @@ pub struct PostProcessConfig {
     /// the kept box's own direction along it. A per-voxel heading is a noisy guess; the axis of
     /// a whole person's votes is not, and IoU depends on the axis alone.
     pub merge_heading: bool,
+    /// With voting, each candidate weighs its score raised to this power (1: the score). Above
+    /// 1 the confident candidates count more than the many doubtful ones at a person's edge.
+    pub merge_power: f64,
 }
 
 impl Default for PostProcessConfig {
@@ -68,6 +71,7 @@ impl Default for PostProcessConfig {
             pre_nms_max: None,
             merge_radius: 0.0,
             merge_heading: true,
+            merge_power: 1.0,
         }
     }
 }
@@ -101,7 +105,7 @@ impl PostProcessConfig {
             NmsKind::None => nms_circle(&boxes, &scores, 0.0, &cfg),
         };
         let kept_boxes = if self.merge_radius > 0.0 {
-            vote(&boxes, &scores, &kept, self.merge_radius, self.score_threshold, self.merge_heading)
+            vote(&boxes, &scores, &kept, self.merge_radius, self.score_threshold, self.merge_heading, self.merge_power)
         } else {
             kept.iter().map(|&i| boxes[i]).collect()
         };
@@ -159,6 +163,23 @@ mod tests {
     }
 
     #[test]
+    fn voting_power_weighs_confident_candidates_more() {
+        let boxes = vec![at(0.0, 0.0), at(0.3, 0.0)];
+        let post = PostProcessConfig { nms: NmsKind::Circle, circle_radius: 0.2, merge_radius: 0.5, merge_power: 2.0, ..Default::default() };
+        let d = post.apply(boxes, vec![0.8, 0.4]);
+        // NMS keeps both (0.3 m apart, circle 0.2 m); the first votes for itself alone, the second
+        // for itself alone too (each candidate votes for its nearest kept box).
+        assert_eq!(d.boxes.len(), 2);
+        let one = PostProcessConfig { circle_radius: 0.5, ..post.clone() };
+        let d = one.apply(vec![at(0.0, 0.0), at(0.3, 0.0)], vec![0.8, 0.4]);
+        // Weights 0.64 and 0.16: cx = 0.16·0.3 / 0.8 = 0.06 (0.1 with the scores themselves).
+        assert_eq!(d.boxes.len(), 1);
+        assert!((d.boxes[0].cx - 0.06).abs() < 1e-6, "{:?}", d.boxes[0]);
+        let linear = PostProcessConfig { merge_power: 1.0, ..one };
+        assert!((linear.apply(vec![at(0.0, 0.0), at(0.3, 0.0)], vec![0.8, 0.4]).boxes[0].cx - 0.1).abs() < 1e-6);
+    }
+
+    #[test]
     fn voting_takes_the_mean_axis_and_keeps_the_kept_direction() {
         let turned = |yaw: f64| Box3d { rot_z: yaw, ..at(0.0, 0.0) };
         // Kept box at 3.0 rad; voters at 0.1 − π and 0.3 (the same axis as 0.3 − π ≈ −2.84).
@@ -171,6 +192,9 @@ mod tests {
             .iter()
             .fold((0.0, 0.0), |(s, c), &(a, w): &(f64, f64)| (s + w * (2.0 * a).sin(), c + w * (2.0 * a).cos()));
         let want = 0.5 * s.atan2(c) + std::f64::consts::PI;
+        // Just past π, so written as its twin in (−π, π].
+        assert!(want > std::f64::consts::PI);
+        let want = want - std::f64::consts::TAU;
         assert!((got - want).abs() < 1e-6, "{got} vs {want}: the axis, on the kept box's side");
         let own = PostProcessConfig { merge_heading: false, ..post };
         assert_eq!(own.apply(boxes, scores).boxes[0].rot_z, 3.0);

@@ -8,10 +8,12 @@
 //!   [`checkpoint`] (atomic best/latest, resume), [`metrics`] (CSV), [`plots`] (PNG), [`progress`];
 //! - after a run: [`detector`] ([`RunDetector`]: a run's model on point clouds), [`infer`]
 //!   (detection files, official layout, scores), [`render`] (BEV PNGs);
+//! - on the user's own clouds: [`sensor_pose`] (their frame in JRDB's), [`detect`] (files,
+//!   folders, trees → JSON, KITTI txt, PNG), [`serve`] (the same over HTTP);
 //! - many runs: [`sweep`].
 //!
-//! The binary (`cargo run -p train -- --help`) wraps [`trainer::train`], [`infer::infer`] and
-//! [`sweep::run_sweep`].
+//! The binary (`cargo run -p train -- --help`) wraps [`trainer::train`], [`infer::infer`],
+//! [`sweep::run_sweep`], [`detect::detect`] and [`serve::serve`].
 #![warn(missing_docs)]
 
 /// Backend choice and threads.
@@ -24,6 +26,8 @@ pub mod config;
 pub mod data;
 /// A trained detector loaded from a run folder, applied to point clouds.
 pub mod detector;
+/// People in point-cloud files, folders and trees.
+pub mod detect;
 /// Detection files and scores from a checkpoint.
 pub mod infer;
 /// CSV curves.
@@ -38,6 +42,10 @@ pub mod render;
 pub mod run_dir;
 /// Learning-rate schedules.
 pub mod schedule;
+/// A user's sensor frame in JRDB's base frame.
+pub mod sensor_pose;
+/// The detection service over HTTP.
+pub mod serve;
 /// Sweeps over variants and seeds.
 pub mod sweep;
 /// The training loop.
@@ -48,10 +56,13 @@ pub mod validate;
 pub use backend::BackendKind;
 pub use checkpoint::{Checkpoints, Slot, TrainState};
 pub use config::RunConfig;
+pub use detect::{BoxRecord, DetectOptions, FrameReport};
 pub use detector::RunDetector;
 pub use infer::{InferOptions, InferOutput, infer};
 pub use run_dir::{Existing, RunDir};
 pub use schedule::Schedule;
+pub use sensor_pose::SensorPose;
+pub use serve::ServeOptions;
 pub use sweep::{SweepConfig, SweepResults, run_sweep};
 pub use trainer::{TrainOptions, TrainSummary, train, train_model};
 pub use validate::{FrameResult, Validation, validate};

@@ -8,6 +8,8 @@ use std::path::Path;
 
 use anyhow::{Context, Result, anyhow};
 use data_jrdb::{Box3d, JrdbDataset};
+use image::ImageEncoder;
+use plotters::coord::Shift;
 use plotters::prelude::*;
 
 use crate::plots::register_fonts;
@@ -37,10 +39,34 @@ pub fn render_frames(dataset: &JrdbDataset, frames: &[FrameResult], dir: &Path, 
     Ok(())
 }
 
-/// Draws one frame.
+/// Draws one frame into a PNG file.
 pub fn render_bev(points: &[[f32; 3]], f: &FrameResult, path: &Path, eval_range: f64) -> Result<()> {
+    let root = BitMapBackend::new(path, (SIZE, SIZE)).into_drawing_area();
+    draw_bev(&root, points, f, eval_range)?;
+    root.present().map_err(pe)
+}
+
+/// Draws one frame into PNG bytes (the service's `?render=1`).
+pub fn render_bev_png(points: &[[f32; 3]], f: &FrameResult, eval_range: f64) -> Result<Vec<u8>> {
+    let mut rgb = vec![0u8; (SIZE * SIZE * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut rgb, (SIZE, SIZE)).into_drawing_area();
+        draw_bev(&root, points, f, eval_range)?;
+        root.present().map_err(pe)?;
+    }
+    let mut png = Vec::new();
+    image::codecs::png::PngEncoder::new(&mut png)
+        .write_image(&rgb, SIZE, SIZE, image::ColorType::Rgb8)
+        .map_err(|e| anyhow!("encoding the PNG: {e}"))?;
+    Ok(png)
+}
+
+/// The image's side in pixels.
+const SIZE: u32 = 1100;
+
+fn draw_bev<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, points: &[[f32; 3]], f: &FrameResult, eval_range: f64) -> Result<()> {
     register_fonts();
-    let size = 1100u32;
+    let size = SIZE;
     let half = eval_range + 2.5;
     let px = |x: f64, y: f64| -> (i32, i32) {
         // Forward (x) up, left (y) left.
@@ -48,7 +74,6 @@ pub fn render_bev(points: &[[f32; 3]], f: &FrameResult, path: &Path, eval_range:
         let v = (size as f64 / 2.0) - x / half * (size as f64 / 2.0);
         (u.round() as i32, v.round() as i32)
     };
-    let root = BitMapBackend::new(path, (size, size)).into_drawing_area();
     root.fill(&WHITE).map_err(pe)?;
     let grey = RGBColor(150, 150, 150);
     for p in points {
@@ -86,14 +111,12 @@ pub fn render_bev(points: &[[f32; 3]], f: &FrameResult, path: &Path, eval_range:
     }
     let n_drawn = f.detections.iter().filter(|d| d.score >= LABELLED_SCORE).count();
     let title = format!(
-        "{} / {}   GT {} (green)   detections ≥ {LABELLED_SCORE} {} of {} (red)   circle {eval_range} m",
-        f.sequence,
-        f.name,
+        "{}   GT {} (green)   detections ≥ {LABELLED_SCORE} {} of {} (red)   circle {eval_range} m",
+        if f.sequence.is_empty() { f.name.clone() } else { format!("{} / {}", f.sequence, f.name) },
         f.gt.len(),
         n_drawn,
         f.detections.len()
     );
     root.draw(&Text::new(title, (10, 10), ("sans-serif", 16).into_font())).map_err(pe)?;
-    root.present().map_err(pe)?;
     Ok(())
 }

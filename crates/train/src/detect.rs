@@ -1,0 +1,326 @@
+//! People in point clouds the user has: files (PCD, KITTI `.bin`, `.npy`), folders of them,
+//! glob patterns and JRDB-format trees, through a run's [`RunDetector`]. Per frame it writes
+//!
+//! ```text
+//! OUT/json/<name>.json     a FrameReport: the boxes (x, y, z centre, l, w, h, yaw, score) in the input's frame
+//! OUT/kitti/<name>.txt     the same boxes as the official evaluator's KITTI-style lines
+//! OUT/render/<name>.png    with --render: bird's-eye view in JRDB's base frame
+//! ```
+//!
+//! `<name>` is a file's stem, a file's path under a folder given (without extension), or
+//! `<sequence>/<frame>` for a tree's frames. The service (`serve`) answers the same
+//! [`FrameReport`].
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail, ensure};
+use data_jrdb::split::Layout;
+use data_jrdb::{Box3d, CloudFormat, DatasetConfig, JrdbDataset, Split, read_cloud};
+use eval::jrdb::Detection;
+use eval::kitti::{FileKind, KittiObject};
+use indicatif::ProgressBar;
+use serde::{Deserialize, Serialize};
+
+use crate::detector::RunDetector;
+use crate::progress;
+use crate::render::render_bev;
+use crate::sensor_pose::SensorPose;
+use crate::validate::FrameResult;
+
+/// One box as `detect` writes it and `serve` answers it: the centre, the size (l along the
+/// heading), the heading (radians, counter-clockwise from +x) and the score, in the input's frame.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct BoxRecord {
+    /// Centre x (metres).
+    pub x: f64,
+    /// Centre y (metres).
+    pub y: f64,
+    /// Centre z (metres), the middle of the height.
+    pub z: f64,
+    /// Length, along the heading.
+    pub l: f64,
+    /// Width, across the heading.
+    pub w: f64,
+    /// Height.
+    pub h: f64,
+    /// Heading (radians).
+    pub yaw: f64,
+    /// Confidence in [0, 1].
+    pub score: f64,
+}
+
+impl BoxRecord {
+    /// The record of a box and its score.
+    pub fn new(b: &Box3d, score: f64) -> Self {
+        Self { x: b.cx, y: b.cy, z: b.cz, l: b.l, w: b.w, h: b.h, yaw: b.rot_z, score }
+    }
+
+    /// The box it describes.
+    pub fn to_box(&self) -> Box3d {
+        Box3d { cx: self.x, cy: self.y, cz: self.z, l: self.l, w: self.w, h: self.h, rot_z: self.yaw }
+    }
+}
+
+/// One frame's people, as `detect` writes them to `json/<name>.json` and `serve` answers.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FrameReport {
+    /// The file (or `tree/sequence/frame`) the points came from.
+    pub source: String,
+    /// `pcd`, `bin`, `npy` or `jrdb` (a tree's two LiDARs merged).
+    pub format: String,
+    /// Finite points read.
+    pub points: usize,
+    /// Points dropped for a non-finite coordinate.
+    pub dropped_non_finite: usize,
+    /// The input frame's pose in JRDB's base frame (`x=…,y=…,z=…,yaw=…` degrees).
+    pub pose: String,
+    /// Boxes scoring at least `score_threshold`, best first, in the input's frame.
+    pub detections: Vec<BoxRecord>,
+    /// The score threshold applied.
+    pub score_threshold: f64,
+}
+
+/// A cloud's people in the base frame (for drawing) and in the input's frame (for writing).
+#[derive(Debug, Clone, Default)]
+pub struct Found {
+    /// The points, in the base frame.
+    pub base_points: Vec<[f32; 3]>,
+    /// The detections in the base frame, best first.
+    pub base: Vec<Detection>,
+    /// The same detections in the input's frame.
+    pub input: Vec<Detection>,
+}
+
+/// Moves `points` into the base frame with `pose`, detects, keeps the boxes scoring at least
+/// `score_threshold` (after the run's own post-processing, so the boxes are those `infer` scores) and
+/// moves them back.
+pub fn find_people(detector: &RunDetector, points: &[[f32; 3]], pose: &SensorPose, score_threshold: f64) -> Found {
+    let base_points: Vec<[f32; 3]> = if pose.is_identity() { points.to_vec() } else { points.iter().map(|&p| pose.to_base(p)).collect() };
+    if base_points.is_empty() {
+        return Found::default();
+    }
+    let found = detector.detect(&base_points);
+    let base: Vec<Detection> =
+        found.boxes.iter().zip(&found.scores).map(|(b, &s)| Detection { bbox: *b, score: s as f64 }).filter(|d| d.score >= score_threshold).collect();
+    let input = base.iter().map(|d| Detection { bbox: pose.box_to_input(&d.bbox), score: d.score }).collect();
+    Found { base_points, base, input }
+}
+
+/// The short name of a cloud format, as reports give it.
+pub fn format_name(f: CloudFormat) -> &'static str {
+    match f {
+        CloudFormat::Pcd => "pcd",
+        CloudFormat::KittiBin => "bin",
+        CloudFormat::Npy => "npy",
+    }
+}
+
+/// Where one input frame's points come from.
+#[derive(Debug, Clone)]
+pub enum Source {
+    /// A cloud file.
+    File(PathBuf),
+    /// Frame `index` of a JRDB-format tree (both LiDARs merged by its calibration).
+    Tree(Arc<JrdbDataset>, usize),
+}
+
+/// One frame to detect in, and the name its outputs get.
+#[derive(Debug, Clone)]
+pub struct Input {
+    /// The points' origin.
+    pub source: Source,
+    /// Output name: `/`-separated, no extension.
+    pub name: String,
+}
+
+impl Input {
+    fn describe(&self) -> String {
+        match &self.source {
+            Source::File(p) => p.display().to_string(),
+            Source::Tree(ds, i) => format!("{}/{}/{}", ds.layout.root.display(), ds.frames[*i].sequence, ds.frames[*i].name),
+        }
+    }
+}
+
+/// The frames that `paths` name: files, folders (searched recursively for `.pcd`, `.bin` and
+/// `.npy`), JRDB-format trees (a folder with `pointclouds/`, or its `train_dataset*/`) and glob
+/// patterns of those (for shells that do not expand them). Two inputs that would write the same
+/// output name are an error.
+pub fn collect_inputs(paths: &[PathBuf]) -> Result<Vec<Input>> {
+    ensure!(!paths.is_empty(), "no input: give point-cloud files, folders, glob patterns or a JRDB-format tree");
+    let mut inputs = Vec::new();
+    for p in paths {
+        let text = p.to_string_lossy();
+        if !p.exists() && text.contains(['*', '?', '[']) {
+            let matches = glob::glob(&text).with_context(|| format!("{text}: not a valid glob pattern"))?;
+            let mut n = 0;
+            for m in matches {
+                let m = m.with_context(|| format!("{text}: reading a match"))?;
+                add_path(&m, &mut inputs)?;
+                n += 1;
+            }
+            ensure!(n > 0, "{text}: the pattern matches nothing");
+        } else {
+            add_path(p, &mut inputs)?;
+        }
+    }
+    let mut names: Vec<(&str, usize)> = inputs.iter().enumerate().map(|(i, x)| (x.name.as_str(), i)).collect();
+    names.sort();
+    if let Some(w) = names.windows(2).find(|w| w[0].0 == w[1].0) {
+        bail!(
+            "{} and {} would both write outputs named `{}`; run them into different --out folders",
+            inputs[w[0].1].describe(),
+            inputs[w[1].1].describe(),
+            w[0].0
+        );
+    }
+    Ok(inputs)
+}
+
+fn add_path(p: &Path, inputs: &mut Vec<Input>) -> Result<()> {
+    let meta = std::fs::metadata(p).with_context(|| format!("{}: no such file or folder", p.display()))?;
+    if !meta.is_dir() {
+        let name = p.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| p.display().to_string());
+        inputs.push(Input { source: Source::File(p.to_path_buf()), name });
+        return Ok(());
+    }
+    if Layout::resolve(p).is_ok() {
+        let cfg = DatasetConfig { split: Split::TrainVal, require_labels: false, ..Default::default() };
+        let ds = Arc::new(JrdbDataset::open(p, &cfg).with_context(|| format!("{}: reading the JRDB-format tree", p.display()))?);
+        ensure!(!ds.is_empty(), "{}: the JRDB-format tree has no frames", p.display());
+        for (i, f) in ds.frames.iter().enumerate() {
+            inputs.push(Input { source: Source::Tree(ds.clone(), i), name: format!("{}/{}", f.sequence, f.name) });
+        }
+        return Ok(());
+    }
+    let mut files = Vec::new();
+    walk(p, &mut files)?;
+    files.sort();
+    ensure!(!files.is_empty(), "{}: no .pcd, .bin or .npy file in this folder or below", p.display());
+    for f in files {
+        let rel = f.strip_prefix(p).unwrap_or(&f).with_extension("");
+        let name = rel.components().map(|c| c.as_os_str().to_string_lossy().into_owned()).collect::<Vec<_>>().join("/");
+        inputs.push(Input { source: Source::File(f), name });
+    }
+    Ok(())
+}
+
+fn walk(dir: &Path, files: &mut Vec<PathBuf>) -> Result<()> {
+    for entry in std::fs::read_dir(dir).with_context(|| format!("{}: listing the folder", dir.display()))? {
+        let entry = entry.with_context(|| format!("{}: listing the folder", dir.display()))?;
+        let path = entry.path();
+        if entry.file_type()?.is_dir() {
+            walk(&path, files)?;
+        } else if CloudFormat::from_extension(&path).is_some() {
+            files.push(path);
+        }
+    }
+    Ok(())
+}
+
+/// What `detect` does besides finding people.
+#[derive(Debug, Clone)]
+pub struct DetectOptions {
+    /// The input files' pose in the base frame (trees are merged by their own calibration).
+    pub pose: SensorPose,
+    /// Boxes scoring below this are not written.
+    pub score_threshold: f64,
+    /// The output folder.
+    pub out: PathBuf,
+    /// Draw each frame.
+    pub render: bool,
+    /// A progress bar for more than one frame.
+    pub verbose: bool,
+}
+
+/// What `detect` did.
+#[derive(Debug, Clone, Default)]
+pub struct DetectSummary {
+    /// Frames detected in and written.
+    pub frames: usize,
+    /// Boxes written.
+    pub boxes: usize,
+    /// Inputs that could not be read or written, with the reason.
+    pub failed: Vec<(String, String)>,
+    /// Wall time of the whole command's loop (reading, detecting, writing).
+    pub seconds: f64,
+    /// Time spent in the detector alone.
+    pub detect_seconds: f64,
+}
+
+/// Detects in every input and writes its outputs under `opts.out`; a frame that cannot be read
+/// is reported in the summary and the others go on.
+pub fn detect(detector: &RunDetector, inputs: &[Input], opts: &DetectOptions) -> Result<DetectSummary> {
+    std::fs::create_dir_all(&opts.out).with_context(|| format!("{}: creating the output folder", opts.out.display()))?;
+    let pb = if opts.verbose && inputs.len() > 1 { progress::bar(inputs.len() as u64, "detect") } else { ProgressBar::hidden() };
+    let mut summary = DetectSummary::default();
+    let start = Instant::now();
+    for input in inputs {
+        match detect_one(detector, input, opts) {
+            Ok((n, secs)) => {
+                summary.frames += 1;
+                summary.boxes += n;
+                summary.detect_seconds += secs;
+            }
+            Err(e) => {
+                pb.suspend(|| eprintln!("skipped {}: {e:#}", input.describe()));
+                summary.failed.push((input.describe(), format!("{e:#}")));
+            }
+        }
+        pb.inc(1);
+    }
+    pb.finish_and_clear();
+    summary.seconds = start.elapsed().as_secs_f64();
+    Ok(summary)
+}
+
+fn detect_one(detector: &RunDetector, input: &Input, opts: &DetectOptions) -> Result<(usize, f64)> {
+    let (points, dropped, format, pose) = match &input.source {
+        Source::File(p) => {
+            let c = read_cloud(p)?;
+            (c.points, c.dropped_non_finite, format_name(c.format), opts.pose)
+        }
+        Source::Tree(ds, i) => {
+            let f = ds.load(*i)?;
+            (f.points, f.dropped_non_finite, "jrdb", SensorPose::default())
+        }
+    };
+    let t = Instant::now();
+    let found = find_people(detector, &points, &pose, opts.score_threshold);
+    let secs = t.elapsed().as_secs_f64();
+    let report = FrameReport {
+        source: input.describe(),
+        format: format.into(),
+        points: points.len(),
+        dropped_non_finite: dropped,
+        pose: pose.to_string(),
+        detections: found.input.iter().map(|d| BoxRecord::new(&d.bbox, d.score)).collect(),
+        score_threshold: opts.score_threshold,
+    };
+    let json = opts.out.join("json").join(format!("{}.json", input.name));
+    write_file(&json, serde_json::to_string_pretty(&report)?.as_bytes())?;
+    let kitti: Vec<KittiObject> = found.input.iter().map(|d| KittiObject::from_box3d(&d.bbox, -1, d.score)).collect();
+    let txt = opts.out.join("kitti").join(format!("{}.txt", input.name));
+    if let Some(dir) = txt.parent() {
+        std::fs::create_dir_all(dir).with_context(|| format!("{}: creating the folder", dir.display()))?;
+    }
+    eval::kitti::write_file(&txt, &kitti, FileKind::Detections)?;
+    if opts.render {
+        let png = opts.out.join("render").join(format!("{}.png", input.name));
+        if let Some(dir) = png.parent() {
+            std::fs::create_dir_all(dir).with_context(|| format!("{}: creating the folder", dir.display()))?;
+        }
+        let frame = FrameResult { sequence: String::new(), name: input.name.clone(), gt: Vec::new(), num_points: Vec::new(), detections: found.base };
+        render_bev(&found.base_points, &frame, &png, detector.config().eval.max_range.unwrap_or(25.0))?;
+    }
+    Ok((report.detections.len(), secs))
+}
+
+fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir).with_context(|| format!("{}: creating the folder", dir.display()))?;
+    }
+    std::fs::write(path, bytes).with_context(|| format!("{}: writing", path.display()))
+}

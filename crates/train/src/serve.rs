@@ -1,0 +1,268 @@
+//! `serve`: the detector over HTTP (axum on tokio), loaded once.
+//!
+//! ```text
+//! POST /detect[?format=pcd|bin|npy][&render=1][&score_threshold=0.5]   body: one point cloud
+//!      → 200 application/json FrameReport (or image/png with render=1)
+//!      → 400 malformed cloud, bad query · 413 body over --max-body-mb · 415 format not recognised
+//! GET  /health → 200 {"status": "ok", "model": …, "backend": …, …}
+//! ```
+//!
+//! The body's format comes from the body where it carries a signature (PCD's header, NPY's magic),
+//! else from `format=`, else from the content type (`application/x-pcd`, `application/x-npy`,
+//! `application/x-kitti-bin`). Requests are parsed concurrently on tokio's workers; the model runs
+//! on one thread of its own that takes them from a bounded queue in arrival order, because one
+//! inference already uses every core the CPU backend has (more models would only contend for
+//! them). Each request is logged on stderr in one line: method, path, status, milliseconds.
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use axum::Router;
+use axum::body::Bytes;
+use axum::extract::{DefaultBodyLimit, Query, Request, State};
+use axum::http::{HeaderMap, StatusCode, header};
+use axum::middleware::{self, Next};
+use axum::response::{IntoResponse, Response};
+use axum::routing::{get, post};
+use data_jrdb::{CloudFormat, parse_cloud};
+use serde::Deserialize;
+use serde_json::json;
+use tokio::sync::{mpsc, oneshot};
+
+use crate::backend::BackendKind;
+use crate::checkpoint::Slot;
+use crate::detect::{BoxRecord, FrameReport, find_people, format_name};
+use crate::detector::RunDetector;
+use crate::render::render_bev_png;
+use crate::sensor_pose::SensorPose;
+use crate::validate::FrameResult;
+
+/// How to serve.
+#[derive(Debug, Clone)]
+pub struct ServeOptions {
+    /// The run folder whose model is served.
+    pub run: PathBuf,
+    /// Its checkpoint.
+    pub checkpoint: Slot,
+    /// Backend override.
+    pub backend: Option<BackendKind>,
+    /// Address to listen on.
+    pub addr: SocketAddr,
+    /// Bodies larger than this get 413.
+    pub max_body_bytes: usize,
+    /// Default score threshold (a request's `score_threshold` overrides it).
+    pub score_threshold: f64,
+    /// The clients' sensor pose in the base frame.
+    pub pose: SensorPose,
+    /// Requests waiting for the model beyond this many wait for room (back-pressure).
+    pub queue: usize,
+}
+
+/// One inference for the model thread.
+struct Job {
+    points: Vec<[f32; 3]>,
+    score_threshold: f64,
+    render: bool,
+    reply: oneshot::Sender<Result<Answer, String>>,
+}
+
+enum Answer {
+    Boxes(Vec<BoxRecord>),
+    Png(Vec<u8>),
+}
+
+#[derive(Clone)]
+struct AppState {
+    jobs: mpsc::Sender<Job>,
+    health: serde_json::Value,
+    score_threshold: f64,
+    pose: SensorPose,
+}
+
+/// Loads the model, binds `opts.addr`, prints `listening on http://ADDR` on stdout (the port
+/// chosen when it is 0) and serves until Ctrl-C.
+pub fn serve(opts: &ServeOptions) -> Result<()> {
+    let (jobs, rx) = mpsc::channel::<Job>(opts.queue.max(1));
+    let health = start_model_thread(opts, rx)?;
+    let runtime = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().context("starting the tokio runtime")?;
+    runtime.block_on(async move {
+        let state = AppState { jobs, health, score_threshold: opts.score_threshold, pose: opts.pose };
+        let app = Router::new()
+            .route("/detect", post(detect_handler))
+            .route("/health", get(health_handler))
+            .layer(DefaultBodyLimit::max(opts.max_body_bytes))
+            .layer(middleware::from_fn(log_request))
+            .with_state(state);
+        let listener = tokio::net::TcpListener::bind(opts.addr).await.with_context(|| format!("binding {}", opts.addr))?;
+        let addr = listener.local_addr()?;
+        println!("listening on http://{addr}");
+        eprintln!("POST http://{addr}/detect with a point cloud (PCD, KITTI .bin or .npy); GET http://{addr}/health; Ctrl-C stops");
+        axum::serve(listener, app)
+            .with_graceful_shutdown(async {
+                let _ = tokio::signal::ctrl_c().await;
+            })
+            .await
+            .context("serving")
+    })
+}
+
+/// Loads the detector on its own thread (Burn's CPU backends and the model stay there) and
+/// answers with the health document once it is ready.
+fn start_model_thread(opts: &ServeOptions, mut rx: mpsc::Receiver<Job>) -> Result<serde_json::Value> {
+    let (ready_tx, ready_rx) = std::sync::mpsc::channel();
+    let (run, slot, backend) = (opts.run.clone(), opts.checkpoint, opts.backend);
+    std::thread::Builder::new()
+        .name("model".into())
+        .spawn(move || {
+            let detector = match RunDetector::load(&run, slot, backend) {
+                Ok(d) => d,
+                Err(e) => {
+                    let _ = ready_tx.send(Err(e));
+                    return;
+                }
+            };
+            let cfg = detector.config();
+            let health = json!({
+                "status": "ok",
+                "model": cfg.model.kind(),
+                "backend": cfg.backend.name(),
+                "run": run.display().to_string(),
+                "checkpoint": detector.checkpoint().file_name().map(|n| n.to_string_lossy().into_owned()),
+            });
+            let range = cfg.eval.max_range.unwrap_or(25.0);
+            let _ = ready_tx.send(Ok(health));
+            while let Some(job) = rx.blocking_recv() {
+                let Job { points, score_threshold, render, reply } = job;
+                // A panic inside the model answers 500 for this request; the service goes on.
+                let answer = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                    let found = find_people(&detector, &points, &SensorPose::default(), score_threshold);
+                    if render {
+                        let frame = FrameResult { sequence: String::new(), name: "request".into(), gt: vec![], num_points: vec![], detections: found.base };
+                        render_bev_png(&found.base_points, &frame, range).map(Answer::Png).map_err(|e| format!("{e:#}"))
+                    } else {
+                        Ok(Answer::Boxes(found.input.iter().map(|d| BoxRecord::new(&d.bbox, d.score)).collect()))
+                    }
+                }))
+                .unwrap_or_else(|_| Err("the model failed on this cloud".into()));
+                let _ = reply.send(answer);
+            }
+        })
+        .context("starting the model thread")?;
+    ready_rx.recv().context("the model thread stopped while loading")?
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct DetectQuery {
+    format: Option<String>,
+    render: Option<String>,
+    score_threshold: Option<f64>,
+}
+
+fn json_response(status: StatusCode, value: &serde_json::Value) -> Response {
+    (status, [(header::CONTENT_TYPE, "application/json")], value.to_string()).into_response()
+}
+
+fn error(status: StatusCode, message: impl Into<String>) -> Response {
+    json_response(status, &json!({ "error": message.into() }))
+}
+
+async fn detect_handler(State(state): State<AppState>, query: Result<Query<DetectQuery>, axum::extract::rejection::QueryRejection>, headers: HeaderMap, body: Bytes) -> Response {
+    let Query(q) = match query {
+        Ok(q) => q,
+        Err(e) => return error(StatusCode::BAD_REQUEST, format!("query: {}", e.body_text())),
+    };
+    let render = match q.render.as_deref() {
+        None | Some("0") | Some("false") => false,
+        Some("1") | Some("true") | Some("") => true,
+        Some(v) => return error(StatusCode::BAD_REQUEST, format!("render={v}: use 1 or 0")),
+    };
+    let score_threshold = q.score_threshold.unwrap_or(state.score_threshold);
+    if !(0.0..=1.0).contains(&score_threshold) {
+        return error(StatusCode::BAD_REQUEST, format!("score_threshold={score_threshold}: must lie in [0, 1]"));
+    }
+    if body.is_empty() {
+        return error(StatusCode::BAD_REQUEST, "empty body: POST a point cloud (PCD, KITTI .bin or .npy)");
+    }
+    let format = match body_format(&body, q.format.as_deref(), &headers) {
+        Ok(f) => f,
+        Err(r) => return r,
+    };
+    let started = Instant::now();
+    let cloud = match tokio::task::spawn_blocking(move || parse_cloud(&body, format)).await {
+        Ok(Ok(c)) => c,
+        Ok(Err(kind)) => return error(StatusCode::BAD_REQUEST, format!("not a valid {} cloud: {kind}", format_name(format))),
+        Err(_) => return error(StatusCode::INTERNAL_SERVER_ERROR, "reading the cloud failed"),
+    };
+    let points: Vec<[f32; 3]> = if state.pose.is_identity() { cloud.points.clone() } else { cloud.points.iter().map(|&p| state.pose.to_base(p)).collect() };
+    let (tx, rx) = oneshot::channel();
+    if state.jobs.send(Job { points, score_threshold, render, reply: tx }).await.is_err() {
+        return error(StatusCode::SERVICE_UNAVAILABLE, "the model is not running");
+    }
+    match rx.await {
+        Ok(Ok(Answer::Png(png))) => ([(header::CONTENT_TYPE, "image/png")], png).into_response(),
+        Ok(Ok(Answer::Boxes(base))) => {
+            // Boxes come back in the base frame; answer them in the client's.
+            let detections = base.iter().map(|b| BoxRecord::new(&state.pose.box_to_input(&b.to_box()), b.score)).collect();
+            let report = FrameReport {
+                source: "request body".into(),
+                format: format_name(format).into(),
+                points: cloud.points.len(),
+                dropped_non_finite: cloud.dropped_non_finite,
+                pose: state.pose.to_string(),
+                detections,
+                score_threshold,
+            };
+            let mut value = serde_json::to_value(&report).unwrap_or_default();
+            value["ms"] = json!(started.elapsed().as_secs_f64() * 1e3);
+            json_response(StatusCode::OK, &value)
+        }
+        Ok(Err(message)) => error(StatusCode::INTERNAL_SERVER_ERROR, message),
+        Err(_) => error(StatusCode::INTERNAL_SERVER_ERROR, "the model thread dropped the request"),
+    }
+}
+
+/// The body's format: its signature, else `format=`, else the content type; else 415.
+fn body_format(body: &[u8], query: Option<&str>, headers: &HeaderMap) -> Result<CloudFormat, Response> {
+    let named = |name: &str| match name.trim().to_ascii_lowercase().as_str() {
+        "pcd" => Some(CloudFormat::Pcd),
+        "bin" | "kitti" => Some(CloudFormat::KittiBin),
+        "npy" => Some(CloudFormat::Npy),
+        _ => None,
+    };
+    if let Some(f) = CloudFormat::sniff(body) {
+        return Ok(f);
+    }
+    if let Some(q) = query {
+        return named(q).ok_or_else(|| error(StatusCode::BAD_REQUEST, format!("format={q}: use pcd, bin or npy")));
+    }
+    let content_type = headers.get(header::CONTENT_TYPE).and_then(|v| v.to_str().ok()).unwrap_or("");
+    let essence = content_type.split(';').next().unwrap_or("").trim().to_ascii_lowercase();
+    let by_type = match essence.as_str() {
+        "application/x-pcd" | "application/pcd" | "text/x-pcd" => Some(CloudFormat::Pcd),
+        "application/x-npy" | "application/npy" => Some(CloudFormat::Npy),
+        "application/x-kitti-bin" => Some(CloudFormat::KittiBin),
+        _ => None,
+    };
+    by_type.ok_or_else(|| {
+        let said = if content_type.is_empty() { "no content type".to_string() } else { format!("content type `{content_type}`") };
+        error(
+            StatusCode::UNSUPPORTED_MEDIA_TYPE,
+            format!("unrecognised point-cloud format: the body has no PCD header or NPY magic and {said} names none; send ?format=pcd|bin|npy or Content-Type application/x-pcd, application/x-npy or application/x-kitti-bin"),
+        )
+    })
+}
+
+async fn health_handler(State(state): State<AppState>) -> Response {
+    json_response(StatusCode::OK, &state.health)
+}
+
+async fn log_request(req: Request, next: Next) -> Response {
+    let (method, path) = (req.method().clone(), req.uri().path().to_owned());
+    let started = Instant::now();
+    let res = next.run(req).await;
+    eprintln!("{method} {path} {} {:.1} ms", res.status().as_u16(), started.elapsed().as_secs_f64() * 1e3);
+    res
+}

@@ -1,0 +1,342 @@
+//! `detect` and `serve` end to end through the binary, on the shipped weights and frames the
+//! simulator wrote: `detect` on a JRDB-format tree gives `infer`'s boxes; the same frame written
+//! as PCD (three encodings, with NaN points and extra fields), KITTI `.bin` and `.npy` gives the
+//! same boxes; a sensor pose moves them as it moves the points; bad inputs are named and the
+//! others still written; the service under concurrent clients answers every valid body with
+//! `detect`'s boxes, every malformed one with a 4xx, and stays healthy.
+
+use std::collections::BTreeMap;
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::TcpStream;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::Duration;
+
+use data_jrdb::pcd::{Column, Encoding, FieldType, encode_pcd};
+use data_jrdb::sim::{SynthConfig, synth};
+use data_jrdb::{DatasetConfig, JrdbDataset, Split};
+use eval::jrdb::read_detections;
+use train::{BoxRecord, FrameReport};
+
+fn weights() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../weights/person_minkunet")
+}
+
+fn train_bin(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_train")).args(args).env("NO_COLOR", "1").output().expect("runs")
+}
+
+fn ok(args: &[&str]) -> std::process::Output {
+    let out = train_bin(args);
+    assert!(out.status.success(), "train {args:?} failed:\n{}\n{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    out
+}
+
+fn report(path: &Path) -> FrameReport {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))).unwrap()
+}
+
+/// A small simulated tree and its frames merged into the base frame.
+fn tree(dir: &Path) -> (PathBuf, Vec<data_jrdb::Frame>) {
+    let root = dir.join("sim");
+    synth(&root, &SynthConfig { sequences: 1, frames: 2, seed: 11, max_people: 12, ..Default::default() }).unwrap();
+    let ds = JrdbDataset::open(&root, &DatasetConfig { split: Split::TrainVal, require_labels: false, ..Default::default() }).unwrap();
+    let frames = (0..ds.len()).map(|i| ds.load(i).unwrap()).collect();
+    (root, frames)
+}
+
+fn xyz_columns(points: &[[f32; 3]]) -> Vec<Column> {
+    ["x", "y", "z"]
+        .iter()
+        .enumerate()
+        .map(|(k, n)| Column { name: n.to_string(), ty: FieldType::F32, values: points.iter().map(|p| p[k] as f64).collect() })
+        .collect()
+}
+
+/// A PCD with an intensity field between y and z, a ring field, and NaN points spread through.
+fn pcd_with_extras_and_nans(points: &[[f32; 3]], encoding: Encoding) -> Vec<u8> {
+    let mut rows: Vec<[f64; 5]> = Vec::new();
+    for (i, p) in points.iter().enumerate() {
+        if i % 1000 == 0 {
+            rows.push([f64::NAN, f64::NAN, f64::NAN, 0.0, 0.0]);
+        }
+        rows.push([p[0] as f64, p[1] as f64, p[2] as f64, (i % 255) as f64, (i % 16) as f64]);
+    }
+    let col = |name: &str, ty, k: usize| Column { name: name.into(), ty, values: rows.iter().map(|r| r[k]).collect() };
+    encode_pcd(&[col("x", FieldType::F32, 0), col("y", FieldType::F32, 1), col("intensity", FieldType::F32, 3), col("z", FieldType::F32, 2), col("ring", FieldType::U16, 4)], encoding)
+}
+
+fn kitti_bin(points: &[[f32; 3]]) -> Vec<u8> {
+    points.iter().flat_map(|p| [p[0], p[1], p[2], 0.5f32]).flat_map(f32::to_le_bytes).collect()
+}
+
+/// An `.npy` (format 1.0) of `points` as N×cols, float32 or float64.
+fn npy(points: &[[f32; 3]], cols: usize, f64s: bool) -> Vec<u8> {
+    let descr = if f64s { "<f8" } else { "<f4" };
+    let mut header = format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': ({}, {cols}), }}", points.len());
+    while (10 + header.len() + 1) % 64 != 0 {
+        header.push(' ');
+    }
+    header.push('\n');
+    let mut out = b"\x93NUMPY\x01\x00".to_vec();
+    out.extend((header.len() as u16).to_le_bytes());
+    out.extend(header.as_bytes());
+    for p in points {
+        let row = [p[0], p[1], p[2], 1.0];
+        for &v in &row[..cols] {
+            if f64s {
+                out.extend((v as f64).to_le_bytes());
+            } else {
+                out.extend(v.to_le_bytes());
+            }
+        }
+    }
+    out
+}
+
+fn assert_same_boxes(got: &[BoxRecord], want: &[BoxRecord], what: &str) {
+    assert_eq!(got.len(), want.len(), "{what}: number of boxes");
+    for (g, w) in got.iter().zip(want) {
+        for (a, b) in [(g.x, w.x), (g.y, w.y), (g.z, w.z), (g.l, w.l), (g.w, w.w), (g.h, w.h), (g.yaw, w.yaw), (g.score, w.score)] {
+            assert!((a - b).abs() < 1e-9, "{what}: {g:?} vs {w:?}");
+        }
+    }
+}
+
+#[test]
+fn detect_gives_infers_boxes_in_every_input_format() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (root, frames) = tree(tmp.path());
+    let w = weights();
+    let (w, r) = (w.to_str().unwrap(), root.to_str().unwrap());
+
+    // The tree as `infer` scores it, and as `detect` reads it.
+    let infer_out = tmp.path().join("infer");
+    ok(&["infer", "--run", w, "--data-root", r, "--split", "train-val", "--out", infer_out.to_str().unwrap()]);
+    let tree_out = tmp.path().join("tree-out");
+    ok(&["detect", r, "--run", w, "--score-threshold", "0", "--render", "--out", tree_out.to_str().unwrap()]);
+    let seq = &frames[0].sequence;
+    let inferred = read_detections(&infer_out.join("json").join(format!("{seq}.json"))).unwrap();
+    let mut total = 0;
+    for f in &frames {
+        let want: Vec<BoxRecord> = inferred.detections[&f.name].iter().map(|d| BoxRecord::new(&d.bbox, d.score)).collect();
+        let got = report(&tree_out.join("json").join(seq).join(format!("{}.json", f.name)));
+        assert_eq!((got.format.as_str(), got.points), ("jrdb", f.points.len()));
+        assert_same_boxes(&got.detections, &want, &format!("tree frame {}", f.name));
+        total += want.len();
+        let txt = std::fs::read_to_string(tree_out.join("kitti").join(seq).join(format!("{}.txt", f.name))).unwrap();
+        assert_eq!(txt.lines().count(), want.len());
+        assert!(txt.lines().all(|l| l.starts_with("Pedestrian ")));
+        let png = std::fs::read(tree_out.join("render").join(seq).join(format!("{}.png", f.name))).unwrap();
+        assert!(png.starts_with(b"\x89PNG"));
+    }
+    assert!(total > 0, "the shipped weights find people in these frames");
+
+    // Frame 0 in every format another tool might write.
+    let points = &frames[0].points;
+    let files = tmp.path().join("clouds");
+    std::fs::create_dir_all(files.join("nested")).unwrap();
+    let write = |name: &str, bytes: Vec<u8>| std::fs::write(files.join(name), bytes).unwrap();
+    write("ascii.pcd", encode_pcd(&xyz_columns(points), Encoding::Ascii));
+    write("binary.pcd", pcd_with_extras_and_nans(points, Encoding::Binary));
+    write("nested/compressed.pcd", pcd_with_extras_and_nans(points, Encoding::BinaryCompressed));
+    write("velodyne.bin", kitti_bin(points));
+    write("n4_f32.npy", npy(points, 4, false));
+    write("n3_f64.npy", npy(points, 3, true));
+    write("notes.txt", b"not a cloud".to_vec());
+    let files_out = tmp.path().join("files-out");
+    ok(&["detect", files.to_str().unwrap(), "--run", w, "--score-threshold", "0", "--out", files_out.to_str().unwrap()]);
+    let want = report(&tree_out.join("json").join(seq).join(format!("{}.json", frames[0].name)));
+    let nans = points.len().div_ceil(1000);
+    for (name, format, dropped) in [
+        ("ascii", "pcd", 0),
+        ("binary", "pcd", nans),
+        ("nested/compressed", "pcd", nans),
+        ("velodyne", "bin", 0),
+        ("n4_f32", "npy", 0),
+        ("n3_f64", "npy", 0),
+    ] {
+        let got = report(&files_out.join("json").join(format!("{name}.json")));
+        assert_eq!((got.format.as_str(), got.points, got.dropped_non_finite), (format, points.len(), dropped), "{name}");
+        assert_same_boxes(&got.detections, &want.detections, name);
+    }
+    assert!(!files_out.join("json").join("notes.json").exists(), "files of other types are not inputs");
+
+    // A glob the shell did not expand, and a sensor turned by 180° about z: the points are
+    // negated in x and y exactly, so the boxes are the base frame's turned back.
+    let turned: Vec<[f32; 3]> = points.iter().map(|p| [-p[0], -p[1], p[2]]).collect();
+    std::fs::write(tmp.path().join("turned.npy"), npy(&turned, 3, false)).unwrap();
+    let glob = tmp.path().join("turn*.npy");
+    let turned_out = tmp.path().join("turned-out");
+    ok(&["detect", glob.to_str().unwrap(), "--run", w, "--score-threshold", "0", "--transform", "yaw=180", "--out", turned_out.to_str().unwrap()]);
+    let got = report(&turned_out.join("json").join("turned.json"));
+    let expect: Vec<BoxRecord> = want
+        .detections
+        .iter()
+        .map(|b| {
+            let yaw = (b.yaw - std::f64::consts::PI).rem_euclid(std::f64::consts::TAU);
+            BoxRecord { x: -b.x, y: -b.y, yaw: if yaw > std::f64::consts::PI { yaw - std::f64::consts::TAU } else { yaw }, ..*b }
+        })
+        .collect();
+    assert_same_boxes(&got.detections, &expect, "turned sensor");
+
+    // The default threshold keeps a subset, best first.
+    let default_out = tmp.path().join("default-out");
+    ok(&["detect", files.join("velodyne.bin").to_str().unwrap(), "--run", w, "--out", default_out.to_str().unwrap()]);
+    let kept = report(&default_out.join("json").join("velodyne.json"));
+    assert_eq!(kept.score_threshold, 0.5);
+    let expected: Vec<BoxRecord> = want.detections.iter().filter(|b| b.score >= 0.5).copied().collect();
+    assert_same_boxes(&kept.detections, &expected, "default threshold");
+}
+
+#[test]
+fn bad_inputs_are_named_and_the_others_still_written() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("mixed");
+    std::fs::create_dir_all(&dir).unwrap();
+    let points: Vec<[f32; 3]> = (0..500).map(|i| [3.0 + (i % 10) as f32 * 0.03, 0.5 + (i / 10 % 10) as f32 * 0.03, -0.7 + (i / 100) as f32 * 0.3]).collect();
+    std::fs::write(dir.join("good.bin"), kitti_bin(&points)).unwrap();
+    std::fs::write(dir.join("truncated.bin"), &kitti_bin(&points)[..100 * 16 + 5]).unwrap();
+    std::fs::write(dir.join("broken.pcd"), b"VERSION 0.7\nFIELDS x y\nDATA ascii\n1 2\n").unwrap();
+    std::fs::write(dir.join("empty.npy"), npy(&[], 3, false)).unwrap();
+    let out = tmp.path().join("out");
+    let w = weights();
+    let res = train_bin(&["detect", dir.to_str().unwrap(), "--run", w.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&res.stderr);
+    assert!(!res.status.success());
+    assert!(err.contains("truncated.bin") && err.contains("broken.pcd"), "{err}");
+    assert!(err.contains("2 of 4 inputs"), "{err}");
+    assert!(out.join("json/good.json").exists() && out.join("kitti/good.txt").exists());
+    // An empty cloud is a valid frame with nobody in it.
+    assert_eq!(report(&out.join("json/empty.json")).detections, vec![]);
+
+    let missing = tmp.path().join("nowhere.pcd");
+    let res = train_bin(&["detect", missing.to_str().unwrap(), "--run", w.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert!(!res.status.success() && String::from_utf8_lossy(&res.stderr).contains("nowhere.pcd"));
+    let res = train_bin(&["detect", dir.to_str().unwrap(), "--run", tmp.path().to_str().unwrap()]);
+    assert!(!res.status.success() && String::from_utf8_lossy(&res.stderr).contains("not a run folder"));
+    let res = train_bin(&["detect", dir.to_str().unwrap(), "--run", w.to_str().unwrap(), "--transform", "pitch=3"]);
+    assert!(!res.status.success() && String::from_utf8_lossy(&res.stderr).contains("unknown key"));
+}
+
+/// The service's process, killed when the test ends however it ends.
+struct Server {
+    child: Child,
+    addr: String,
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn start_server(extra: &[&str]) -> Server {
+    let w = weights();
+    let mut args = vec!["serve", "--run", w.to_str().unwrap(), "--addr", "127.0.0.1:0"];
+    args.extend_from_slice(extra);
+    let mut child = Command::new(env!("CARGO_BIN_EXE_train")).args(&args).stdout(Stdio::piped()).stderr(Stdio::null()).spawn().expect("starts");
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().unwrap()).read_line(&mut line).unwrap();
+    let addr = line.trim().strip_prefix("listening on http://").unwrap_or_else(|| panic!("unexpected first line {line:?}")).to_string();
+    Server { child, addr }
+}
+
+struct Reply {
+    status: u16,
+    headers: BTreeMap<String, String>,
+    body: Vec<u8>,
+}
+
+/// One HTTP/1.1 request on its own connection. The body is sent from another thread while the
+/// reply is read, so a server that answers before reading a body (413) is still heard.
+fn request(addr: &str, method: &str, target: &str, headers: &[(&str, &str)], body: &[u8]) -> Reply {
+    let mut stream = TcpStream::connect(addr).unwrap();
+    stream.set_read_timeout(Some(Duration::from_secs(120))).unwrap();
+    let mut head = format!("{method} {target} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\nContent-Length: {}\r\n", body.len());
+    for (k, v) in headers {
+        head.push_str(&format!("{k}: {v}\r\n"));
+    }
+    head.push_str("\r\n");
+    let mut writer = stream.try_clone().unwrap();
+    let body = body.to_vec();
+    let sender = std::thread::spawn(move || {
+        let _ = writer.write_all(head.as_bytes()).and_then(|_| writer.write_all(&body));
+    });
+    let mut raw = Vec::new();
+    let _ = stream.read_to_end(&mut raw);
+    let _ = sender.join();
+    let split = raw.windows(4).position(|w| w == b"\r\n\r\n").unwrap_or_else(|| panic!("no reply head in {:?}", String::from_utf8_lossy(&raw)));
+    let head = String::from_utf8_lossy(&raw[..split]).into_owned();
+    let mut lines = head.lines();
+    let status = lines.next().unwrap().split_whitespace().nth(1).unwrap().parse().unwrap();
+    let headers = lines.filter_map(|l| l.split_once(':')).map(|(k, v)| (k.trim().to_ascii_lowercase(), v.trim().to_string())).collect();
+    Reply { status, headers, body: raw[split + 4..].to_vec() }
+}
+
+#[test]
+fn the_service_answers_concurrent_valid_and_malformed_bodies() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (_, frames) = tree(tmp.path());
+    let points = frames[0].points.clone();
+    let pcd = encode_pcd(&xyz_columns(&points), Encoding::BinaryCompressed);
+    std::fs::write(tmp.path().join("frame.pcd"), &pcd).unwrap();
+    let out = tmp.path().join("out");
+    let w = weights();
+    ok(&["detect", tmp.path().join("frame.pcd").to_str().unwrap(), "--run", w.to_str().unwrap(), "--score-threshold", "0.2", "--out", out.to_str().unwrap()]);
+    let want = report(&out.join("json/frame.json")).detections;
+    assert!(!want.is_empty());
+
+    let server = start_server(&["--score-threshold", "0.2", "--max-body-mb", "2"]);
+    let health = request(&server.addr, "GET", "/health", &[], b"");
+    assert_eq!(health.status, 200);
+    let h: serde_json::Value = serde_json::from_slice(&health.body).unwrap();
+    assert_eq!((h["model"].as_str(), h["backend"].as_str()), (Some("person_minkunet"), Some("flex")));
+
+    let bin = kitti_bin(&points);
+    let npy = npy(&points, 4, false);
+    let oversize = vec![0u8; 3 << 20];
+    let threads: Vec<_> = (0..8)
+        .map(|t| {
+            let (addr, pcd, bin, npy, oversize, want) = (server.addr.clone(), pcd.clone(), bin.clone(), npy.clone(), oversize.clone(), want.clone());
+            std::thread::spawn(move || {
+                for round in 0..2 {
+                    let case = (t + round) % 8;
+                    let r = match case {
+                        0 => request(&addr, "POST", "/detect", &[("Content-Type", "application/octet-stream")], &pcd),
+                        1 => request(&addr, "POST", "/detect?format=bin", &[], &bin),
+                        2 => request(&addr, "POST", "/detect", &[("Content-Type", "application/x-kitti-bin")], &bin),
+                        3 => request(&addr, "POST", "/detect", &[], &npy),
+                        4 => request(&addr, "POST", "/detect", &[("Content-Type", "image/png")], &bin),
+                        5 => request(&addr, "POST", "/detect", &[], &pcd[..pcd.len() / 2]),
+                        6 => request(&addr, "POST", "/detect?format=bin", &[], &oversize),
+                        _ => request(&addr, "POST", "/detect?frmat=bin", &[], &bin),
+                    };
+                    match case {
+                        0..=3 => {
+                            assert_eq!(r.status, 200, "case {case}: {}", String::from_utf8_lossy(&r.body));
+                            let got: FrameReport = serde_json::from_slice(&r.body).unwrap();
+                            assert_same_boxes(&got.detections, &want, &format!("case {case}"));
+                        }
+                        4 => assert_eq!(r.status, 415, "{}", String::from_utf8_lossy(&r.body)),
+                        5 => {
+                            assert_eq!(r.status, 400);
+                            assert!(String::from_utf8_lossy(&r.body).contains("not a valid pcd cloud"), "{}", String::from_utf8_lossy(&r.body));
+                        }
+                        6 => assert_eq!(r.status, 413),
+                        _ => assert_eq!(r.status, 400, "an unknown query parameter"),
+                    }
+                }
+            })
+        })
+        .collect();
+    for t in threads {
+        t.join().expect("a client's checks failed");
+    }
+    let png = request(&server.addr, "POST", "/detect?render=1", &[], &npy);
+    assert_eq!((png.status, png.headers.get("content-type").map(String::as_str)), (200, Some("image/png")));
+    assert!(png.body.starts_with(b"\x89PNG"));
+    assert_eq!(request(&server.addr, "POST", "/detect", &[], b"").status, 400);
+    assert_eq!(request(&server.addr, "GET", "/health", &[], b"").status, 200, "still healthy");
+}
