@@ -36,6 +36,14 @@ impl ModelConfig {
         }
     }
 
+    /// Checks what serde cannot.
+    pub fn validate(&self) -> Result<(), String> {
+        match self {
+            ModelConfig::PersonMinkunet(c) => c.validate(),
+            ModelConfig::Centerpoint(_) => Ok(()),
+        }
+    }
+
     /// The post-processing of either model.
     pub fn post(&self) -> &PostProcessConfig {
         match self {

@@ -4,6 +4,7 @@
 mod common;
 
 use common::{ap03, head_tail, sim_batch, train, valid_gt};
+use model::person_minkunet::InputFeatures;
 use model::{Detector, PersonMinkUNet, PersonMinkUNetConfig};
 use sparse_conv::burn::module::Module;
 use sparse_conv::burn::tensor::Device;
@@ -13,12 +14,33 @@ fn small() -> PersonMinkUNetConfig {
 }
 
 #[test]
+fn local_input_features_place_each_point_inside_its_voxel() {
+    let batch = sim_batch("local", 1, 8, 10.0, 5);
+    let device = Device::flex();
+    let x = PersonMinkUNet::input(&batch, InputFeatures::XyzLocal, &device);
+    assert_eq!(x.channels(), 6);
+    let f = x.features().into_data().try_to_vec::<f32>().unwrap();
+    for row in 0..batch.num_voxels() {
+        let (p, c) = (batch.point(row), batch.centre(row));
+        for k in 0..3 {
+            assert_eq!(f[6 * row + k], p[k], "raw channels first");
+            let local = f[6 * row + 3 + k];
+            assert!((-0.5001..=0.5001).contains(&local), "row {row}: {local} is outside its voxel");
+            assert!((c[k] + local * batch.voxel_size[k] - p[k]).abs() < 1e-4, "row {row}: the point is the centre plus the local offset");
+        }
+    }
+    let wrong = PersonMinkUNetConfig { input: InputFeatures::XyzLocal, ..small() };
+    assert!(wrong.validate().unwrap_err().contains("in_channels = 3"));
+    assert!(PersonMinkUNetConfig { in_channels: 6, ..wrong }.validate().is_ok());
+}
+
+#[test]
 fn unet_levels_keep_their_coordinates() {
     let batch = sim_batch("unet", 2, 8, 10.0, 5);
     let device = Device::flex();
     let cfg = small();
     let model = common::initialised(&device, None, || cfg.init(&device));
-    let input = PersonMinkUNet::input(&batch, &device);
+    let input = PersonMinkUNet::input(&batch, cfg.input, &device);
     let levels = model.backbone.forward_levels(input);
     let cs = cfg.backbone().scaled_channels();
     let n = cfg.backbone().stages();

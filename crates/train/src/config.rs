@@ -209,6 +209,7 @@ impl RunConfig {
             bail!("data.voxel_size must be positive, got {:?}", self.data.voxel_size);
         }
         self.train.schedule.validate()?;
+        self.model.validate().map_err(anyhow::Error::msg)?;
         Ok(())
     }
 }

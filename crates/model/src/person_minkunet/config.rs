@@ -18,12 +18,37 @@ pub enum TargetVariant {
     Paper,
 }
 
+/// What each voxel's input features are.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum InputFeatures {
+    /// The voxel's point, raw x, y, z in metres (the authors'; `in_channels = 3`).
+    #[default]
+    Xyz,
+    /// Raw x, y, z and the point's place inside its voxel, `(p − centre) / voxel size` in
+    /// [−½, ½] (`in_channels = 6`). Batch norm scales raw x by its spread over the scene (metres),
+    /// so a few centimetres inside a voxel all but vanish from the raw channels; these keep them.
+    XyzLocal,
+}
+
+impl InputFeatures {
+    /// Channels per voxel.
+    pub fn channels(self) -> usize {
+        match self {
+            Self::Xyz => 3,
+            Self::XyzLocal => 6,
+        }
+    }
+}
+
 /// Person-MinkUNet: MinkUNet backbone, per-voxel head, targets, loss and decoding (spec §1.6–1.12).
 #[derive(Serialize, Deserialize, Debug, Clone, PartialEq)]
 #[serde(default, deny_unknown_fields)]
 pub struct PersonMinkUNetConfig {
-    /// Input feature channels (raw xyz: 3).
+    /// Input feature channels: 3 for `input = "xyz"`, 6 for `"xyz_local"`.
     pub in_channels: usize,
+    /// The input features (the authors' raw xyz).
+    pub input: InputFeatures,
     /// Backbone channels `[stem, down_1..down_n, up_1..up_n]` (2n + 1 entries) before `width`.
     pub channels: Vec<usize>,
     /// Width factor (the paper's `cr`).
@@ -54,6 +79,7 @@ impl Default for PersonMinkUNetConfig {
     fn default() -> Self {
         Self {
             in_channels: 3,
+            input: InputFeatures::Xyz,
             channels: vec![32, 32, 64, 128, 256, 256, 128, 96, 96],
             width: 1.0,
             num_bins: 12,
@@ -71,6 +97,19 @@ impl Default for PersonMinkUNetConfig {
 }
 
 impl PersonMinkUNetConfig {
+    /// Checks what serde cannot: the input features fill `in_channels`.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.in_channels != self.input.channels() {
+            return Err(format!(
+                "model.in_channels = {} but model.input = {:?} gives {} channels",
+                self.in_channels,
+                self.input,
+                self.input.channels()
+            ));
+        }
+        Ok(())
+    }
+
     /// The backbone's configuration.
     pub fn backbone(&self) -> MinkUNetConfig {
         MinkUNetConfig { in_channels: self.in_channels, channels: self.channels.clone(), width: self.width }

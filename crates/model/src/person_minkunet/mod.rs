@@ -16,7 +16,7 @@ pub mod targets;
 
 pub use backbone::{MinkUNet, MinkUNetConfig, UNetLevels};
 pub use box_coder::BoxCoder;
-pub use config::{PersonMinkUNetConfig, TargetVariant};
+pub use config::{InputFeatures, PersonMinkUNetConfig, TargetVariant};
 
 use data_jrdb::Batch;
 use sparse_conv::SparseTensor;
@@ -65,19 +65,29 @@ impl PersonMinkUNet {
         LossWeights { cls: c.cls_weight, loc: c.loc_weight, dims: c.dims_weight, bin: c.bin_weight, residual: c.residual_weight }
     }
 
-    /// The batch's voxels as a stride-1 sparse tensor on `device`.
+    /// The batch's voxels with `features` as a stride-1 sparse tensor on `device`.
     ///
     /// # Panics
     /// If the batch's coordinates repeat a voxel (a collated batch never does).
-    pub fn input(batch: &Batch, device: &Device) -> SparseTensor {
+    pub fn input(batch: &Batch, features: InputFeatures, device: &Device) -> SparseTensor {
         let m = batch.num_voxels();
-        let features = Tensor::<2>::from_data(TensorData::new(batch.features.clone(), [m, 3]), device);
+        let values = match features {
+            InputFeatures::Xyz => batch.features.clone(),
+            InputFeatures::XyzLocal => (0..m)
+                .flat_map(|row| {
+                    let (p, c) = (batch.point(row), batch.centre(row));
+                    let local = [0, 1, 2].map(|k| (p[k] - c[k]) / batch.voxel_size[k]);
+                    [p[0], p[1], p[2], local[0], local[1], local[2]]
+                })
+                .collect(),
+        };
+        let features = Tensor::<2>::from_data(TensorData::new(values, [m, features.channels()]), device);
         SparseTensor::new(features, batch.coords.clone()).expect("a collated batch has unique, in-range voxels")
     }
 
     /// Head output for every voxel of the batch, `[M, 2·bins + 7]` (layout in [`crate::box_coder`]).
     pub fn forward(&self, batch: &Batch, device: &Device) -> Tensor<2> {
-        let x = self.backbone.forward(Self::input(batch, device));
+        let x = self.backbone.forward(Self::input(batch, self.config.input, device));
         per_voxel_linear(&self.head, &x)
     }
 }
