@@ -1,5 +1,5 @@
-//! `detect` and `serve` end to end through the binary, on the shipped weights and frames the
-//! simulator wrote: `detect` on a JRDB-format tree gives `infer`'s boxes; the same frame written
+//! `detect` and `serve` end to end through the binary, on the shipped weights, frames the
+//! simulator wrote and a frame other tools wrote (pypcd4, NumPy): `detect` on a JRDB-format tree gives `infer`'s boxes; the same frame written
 //! as PCD (three encodings, with NaN points and extra fields), KITTI `.bin` and `.npy` gives the
 //! same boxes; a sensor pose moves them as it moves the points; bad inputs are named and the
 //! others still written; the service under concurrent clients answers every valid body with
@@ -187,6 +187,25 @@ fn detect_gives_infers_boxes_in_every_input_format() {
     assert_eq!(kept.score_threshold, 0.5);
     let expected: Vec<BoxRecord> = want.detections.iter().filter(|b| b.score >= 0.5).copied().collect();
     assert_same_boxes(&kept.detections, &expected, "default threshold");
+}
+
+#[test]
+fn clouds_written_by_other_tools_give_the_same_people() {
+    // tests/fixtures/other_tools: one frame as PCD in three encodings by pypcd4 and as .npy by
+    // NumPy (make_fixtures.py there).
+    let tmp = tempfile::tempdir().unwrap();
+    let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/other_tools");
+    let w = weights();
+    ok(&["detect", fixtures.to_str().unwrap(), "--run", w.to_str().unwrap(), "--score-threshold", "0", "--render", "--out", tmp.path().to_str().unwrap()]);
+    let want = report(&tmp.path().join("json/frame.json"));
+    assert_eq!((want.format.as_str(), want.points), ("npy", 9746));
+    assert!(want.detections.iter().filter(|b| b.score >= 0.5).count() >= 3, "the three people within 4 m are found");
+    for name in ["ascii", "binary", "binary_compressed"] {
+        let got = report(&tmp.path().join(format!("json/{name}.json")));
+        assert_eq!((got.format.as_str(), got.points, got.dropped_non_finite), ("pcd", 9746, 0), "{name}");
+        assert_same_boxes(&got.detections, &want.detections, name);
+        assert!(tmp.path().join(format!("kitti/{name}.txt")).exists() && tmp.path().join(format!("render/{name}.png")).exists());
+    }
 }
 
 #[test]
