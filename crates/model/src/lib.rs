@@ -13,7 +13,8 @@
 //! - [`bench`]: what the `model-bench` binary measures.
 //!
 //! A trained model on point clouds of your own: `train::RunDetector` loads a run folder (config
-//! and checkpoint) once and detects in `[x, y, z]` arrays (`crates/train/examples/detect_points.rs`).
+//! and checkpoint) once and detects in `[x, y, z]` arrays (`crates/train/examples/detect_points.rs`);
+//! `train detect` (files, folders, trees) and `train serve` (HTTP) wrap it (`docs/detect.md`).
 
 #![warn(missing_docs)]
 
