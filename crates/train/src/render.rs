@@ -110,13 +110,13 @@ fn draw_bev<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, points: &[[f32; 3
         }
     }
     let n_drawn = f.detections.iter().filter(|d| d.score >= LABELLED_SCORE).count();
-    let title = format!(
-        "{}   GT {} (green)   detections ≥ {LABELLED_SCORE} {} of {} (red)   circle {eval_range} m",
-        if f.sequence.is_empty() { f.name.clone() } else { format!("{} / {}", f.sequence, f.name) },
-        f.gt.len(),
-        n_drawn,
-        f.detections.len()
-    );
+    // Frames of a dataset have a sequence and labels; a user's cloud (`detect`, `serve`) has neither.
+    let (name, gt) = if f.sequence.is_empty() {
+        (f.name.clone(), String::new())
+    } else {
+        (format!("{} / {}", f.sequence, f.name), format!("   GT {} (green)", f.gt.len()))
+    };
+    let title = format!("{name}{gt}   detections ≥ {LABELLED_SCORE} {n_drawn} of {} (red)   circle {eval_range} m", f.detections.len());
     root.draw(&Text::new(title, (10, 10), ("sans-serif", 16).into_font())).map_err(pe)?;
     Ok(())
 }
