@@ -56,11 +56,6 @@ impl BoxRecord {
     pub fn new(b: &Box3d, score: f64) -> Self {
         Self { x: b.cx, y: b.cy, z: b.cz, l: b.l, w: b.w, h: b.h, yaw: b.rot_z, score }
     }
-
-    /// The box it describes.
-    pub fn to_box(&self) -> Box3d {
-        Box3d { cx: self.x, cy: self.y, cz: self.z, l: self.l, w: self.w, h: self.h, rot_z: self.yaw }
-    }
 }
 
 /// One frame's people, as `detect` writes them to `json/<name>.json` and `serve` answers.

@@ -62,7 +62,9 @@ pub struct ServeOptions {
 
 /// One inference for the model thread.
 struct Job {
+    /// In the client's frame; `find_people` moves them and the boxes with the service's pose.
     points: Vec<[f32; 3]>,
+    pose: SensorPose,
     score_threshold: f64,
     render: bool,
     reply: oneshot::Sender<Result<Answer, String>>,
@@ -134,10 +136,10 @@ fn start_model_thread(opts: &ServeOptions, mut rx: mpsc::Receiver<Job>) -> Resul
             let range = cfg.eval.max_range.unwrap_or(25.0);
             let _ = ready_tx.send(Ok(health));
             while let Some(job) = rx.blocking_recv() {
-                let Job { points, score_threshold, render, reply } = job;
+                let Job { points, pose, score_threshold, render, reply } = job;
                 // A panic inside the model answers 500 for this request; the service goes on.
                 let answer = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                    let found = find_people(&detector, &points, &SensorPose::default(), score_threshold);
+                    let found = find_people(&detector, &points, &pose, score_threshold);
                     if render {
                         let frame = FrameResult { sequence: String::new(), name: "request".into(), gt: vec![], num_points: vec![], detections: found.base };
                         render_bev_png(&found.base_points, &frame, range).map(Answer::Png).map_err(|e| format!("{e:#}"))
@@ -196,21 +198,19 @@ async fn detect_handler(State(state): State<AppState>, query: Result<Query<Detec
         Ok(Err(kind)) => return error(StatusCode::BAD_REQUEST, format!("not a valid {} cloud: {kind}", format_name(format))),
         Err(_) => return error(StatusCode::INTERNAL_SERVER_ERROR, "reading the cloud failed"),
     };
-    let points: Vec<[f32; 3]> = if state.pose.is_identity() { cloud.points.clone() } else { cloud.points.iter().map(|&p| state.pose.to_base(p)).collect() };
+    let (n_points, dropped_non_finite) = (cloud.points.len(), cloud.dropped_non_finite);
     let (tx, rx) = oneshot::channel();
-    if state.jobs.send(Job { points, score_threshold, render, reply: tx }).await.is_err() {
+    if state.jobs.send(Job { points: cloud.points, pose: state.pose, score_threshold, render, reply: tx }).await.is_err() {
         return error(StatusCode::SERVICE_UNAVAILABLE, "the model is not running");
     }
     match rx.await {
         Ok(Ok(Answer::Png(png))) => ([(header::CONTENT_TYPE, "image/png")], png).into_response(),
-        Ok(Ok(Answer::Boxes(base))) => {
-            // Boxes come back in the base frame; answer them in the client's.
-            let detections = base.iter().map(|b| BoxRecord::new(&state.pose.box_to_input(&b.to_box()), b.score)).collect();
+        Ok(Ok(Answer::Boxes(detections))) => {
             let report = FrameReport {
                 source: "request body".into(),
                 format: format_name(format).into(),
-                points: cloud.points.len(),
-                dropped_non_finite: cloud.dropped_non_finite,
+                points: n_points,
+                dropped_non_finite,
                 pose: state.pose.to_string(),
                 detections,
                 score_threshold,
