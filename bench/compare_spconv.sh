@@ -4,7 +4,7 @@
 #
 #   bash bench/compare_spconv.sh [--install] [--threads 2] [--runs 10] [--warmup 2]
 #                                [--model-runs 3] [--model-warmup 1] [--backends flex,ndarray]
-#                                [--rounds 1] [--scene FILE.npy] [--out DIR] [--quick]
+#                                [--rounds 1] [--scene FILE.npy] [--out DIR] [--quick] [--isa avx2]
 #
 #   --install       create the peer's venv ($PMUNET_PEER_VENV, default ~/.cache/spconv-peer) with
 #                   torch 2.5.1, numpy 1.26.4 and spconv 2.3.8 if it is absent (~2.5 min, ~5 GB).
@@ -19,6 +19,10 @@
 #   --scene FILE    int32 N×4 .npy (default bench/scene_jrdb_like.npy from the repo root).
 #   --out DIR       results folder (default bench/results/<date-time>/).
 #   --quick         few runs and no MinkUNet: a test of the scripts, not a measurement.
+#   --isa avx2      cap both sides at AVX2 + FMA on a CPU that has AVX-512 (an AVX2 machine's code
+#                   paths, not its speed): pmunet with --cpu-kernels avx2, the peer with
+#                   ATEN_CPU_CAPABILITY=avx2, MKL_ENABLE_INSTRUCTIONS=AVX2, ONEDNN_MAX_CPU_ISA=AVX2.
+#                   Default: each side's widest (`native`).
 #
 # Steps (each writes <name>.json, <name>.log = stderr, <name>.rc = exit status into the results folder,
 # or into its round<r>/ folder with --rounds):
@@ -38,7 +42,7 @@ ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 cd "$ROOT" || die "cannot cd to $ROOT"
 
 INSTALL=0 QUICK=0 THREADS=2 RUNS="" WARMUP="" MODEL_RUNS=3 MODEL_WARMUP=1 BACKENDS=flex,ndarray ROUNDS=1
-SCENE=bench/scene_jrdb_like.npy OUT=""
+SCENE=bench/scene_jrdb_like.npy OUT="" ISA=native
 VENV=${PMUNET_PEER_VENV:-$HOME/.cache/spconv-peer}
 
 need() { [[ $# -ge 2 && -n $2 ]] || die "$1 needs a value"; }
@@ -55,6 +59,7 @@ while [[ $# -gt 0 ]]; do
         --backends) need "$@"; BACKENDS=$2; shift 2 ;;
         --rounds) need "$@"; posint "$1" "$2"; ROUNDS=$2; shift 2 ;;
         --scene) need "$@"; SCENE=$2; shift 2 ;;
+        --isa) need "$@"; [[ $2 == avx2 || $2 == native ]] || die "--isa takes avx2 or native, got '$2'"; ISA=$2; shift 2 ;;
         --out) need "$@"; OUT=$2; shift 2 ;;
         -h|--help) usage; exit 0 ;;
         *) die "unknown argument '$1' (see --help)" ;;
@@ -106,6 +111,8 @@ RES=$(cd "$RES" && pwd)
     echo "backends=$BACKENDS"
     echo "rounds=$ROUNDS"
     echo "quick=$QUICK"
+    echo "isa=$ISA"
+    echo "cpu_flags=$(grep -o -w 'avx512f\|avx2\|fma' /proc/cpuinfo 2> /dev/null | sort -u | tr '\n' ' ')"
     echo "peer=$PEER_VERSIONS"
     echo "git_head=$(git rev-parse --short HEAD 2> /dev/null || echo '?')"
     echo "load_before=$(cut -d' ' -f1-3 /proc/loadavg 2> /dev/null)"
@@ -115,6 +122,12 @@ echo "[compare] $THREADS threads, $RUNS runs + $WARMUP warm-ups per conv figure$
 read -r LOAD1 _ < /proc/loadavg 2> /dev/null && echo "[compare] load average now: $LOAD1 (on $(nproc) CPUs; other work skews the figures)"
 
 export OMP_NUM_THREADS=$THREADS MKL_NUM_THREADS=$THREADS RAYON_NUM_THREADS=$THREADS
+PMUNET_ISA=()
+if [[ $ISA == avx2 ]]; then
+    export ATEN_CPU_CAPABILITY=avx2 MKL_ENABLE_INSTRUCTIONS=AVX2 ONEDNN_MAX_CPU_ISA=AVX2
+    PMUNET_ISA=(--cpu-kernels avx2)
+    echo "[compare] both sides capped at AVX2 + FMA"
+fi
 
 FAILED=0
 DIR=$RES  # where step() writes: the results folder, or the round's folder
@@ -147,7 +160,7 @@ peer() {
 pmunet() {
     for b in "${BACKEND_LIST[@]}"; do
         step "pmunet_conv_$b" cargo run -p sparse-conv --bin sparse-conv-bench -- \
-            --coords "$SCENE" --backend "$b" --threads "$THREADS" --runs "$RUNS" --warmup "$WARMUP" --json
+            --coords "$SCENE" --backend "$b" --threads "$THREADS" --runs "$RUNS" --warmup "$WARMUP" --json "${PMUNET_ISA[@]}"
     done
     if [[ $QUICK != 1 ]]; then
         for b in "${BACKEND_LIST[@]}"; do
@@ -157,7 +170,7 @@ pmunet() {
                 read -r batch only <<< "$spec"
                 step "pmunet_model_${b}_b$batch" cargo run -p model --bin model-bench -- \
                     --model person_minkunet --coords "$SCENE" --backend "$b" --batch "$batch" --only "$only" \
-                    --threads "$THREADS" --runs "$MODEL_RUNS" --warmup "$MODEL_WARMUP" --json
+                    --threads "$THREADS" --runs "$MODEL_RUNS" --warmup "$MODEL_WARMUP" --json "${PMUNET_ISA[@]}"
             done
         done
     fi

@@ -279,6 +279,10 @@ def main():
                   f"MinkUNet: median of {meta.get('model_runs', '?')} after {meta.get('model_warmup', '?')} warm-ups; ")
                + f"{meta.get('date', '')} on "
                f"{get(peer, 'env', 'cpu')} ({get(peer, 'env', 'nproc')} CPUs).")
+    kernels = "; ".join(f"pmunet {b}: {get(conv[b], 'cpu_kernels')}" for b in BACKENDS)
+    ctx.append(f"CPU flags: {meta.get('cpu_flags', '?').strip()}; instruction sets: "
+               + ("capped at AVX2 + FMA on both sides (--isa avx2); " if meta.get("isa") == "avx2" else "each side's widest; ")
+               + f"torch's kernels: {get(peer, 'env', 'torch_cpu_capability')}; {kernels}.")
     if meta.get("quick") == "1":
         ctx.append("QUICK RUN (--quick): few runs, MinkUNet skipped — a test of the scripts, not a measurement.")
     notes = []

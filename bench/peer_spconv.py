@@ -504,6 +504,9 @@ def environment():
         "cpu": cpu,
         "nproc": os.cpu_count(),
         "torch_threads": torch.get_num_threads(),
+        # The kernels ATen dispatched to (ATEN_CPU_CAPABILITY caps them): "AVX512", "AVX2", ...
+        "torch_cpu_capability": torch.backends.cpu.get_cpu_capability(),
+        "isa_env": {k: os.environ[k] for k in ("ATEN_CPU_CAPABILITY", "MKL_ENABLE_INSTRUCTIONS", "ONEDNN_MAX_CPU_ISA") if k in os.environ},
         "cuda_available": torch.cuda.is_available(),
     }
 

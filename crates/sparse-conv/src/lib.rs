@@ -4,7 +4,8 @@
 //! - [`geometry`]: batch-indexed voxel coordinates and their hash index, kernel maps
 //!   (submanifold, down-sampling, transposed), the GPU's tile plans.
 //! - [`kernels`]: the math once per target: `kernels::cpu` (general kernels over slices, the
-//!   AVX-512 f32 ones, batch norm's passes, Adam's step) and the CubeCL kernels for GPUs.
+//!   f32 register-tile ones for AVX-512 and AVX2, batch norm's passes, Adam's step) and the CubeCL
+//!   kernels for GPUs.
 //! - [`backend`]: the Burn backend extension and its `Autodiff` backward.
 //! - [`batch_norm`]: batch norm (+ ReLU, + a residual's sum) as one op with its own backward.
 //! - [`adam`]: Adam with the parameter and both moments updated in one pass per parameter.

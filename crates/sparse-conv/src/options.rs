@@ -2,7 +2,7 @@
 //! never reads the environment; an application sets these once, before its first convolution
 //! (the runner from its config's `[kernels]` table, the benchmark binaries from their flags).
 
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicU8, AtomicUsize, Ordering};
 
 use serde::{Deserialize, Serialize};
 
@@ -10,11 +10,14 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "snake_case")]
 pub enum CpuKernels {
-    /// The SIMD micro-kernels where the CPU has the instructions (AVX-512F), the general
-    /// gather–GEMM–scatter path elsewhere.
+    /// The SIMD micro-kernels for the widest instructions the CPU has (AVX-512F, else AVX2 +
+    /// FMA), the general gather–GEMM–scatter path on CPUs with neither.
     #[default]
     Auto,
-    /// The general path on every CPU (to compare the two; f64 always runs it).
+    /// The AVX2 + FMA micro-kernels even where the CPU has AVX-512F (to compare or test them on
+    /// one machine); the general path on CPUs without AVX2 + FMA.
+    Avx2,
+    /// The general path on every CPU (to compare; f64 always runs it).
     Generic,
 }
 
@@ -24,7 +27,7 @@ pub enum CpuKernels {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::Args)]
 #[serde(default, deny_unknown_fields)]
 pub struct KernelOptions {
-    /// CPU kernels: `auto` (SIMD micro-kernels where the CPU has them) or `generic`.
+    /// CPU kernels: `auto` (the widest SIMD micro-kernels the CPU has), `avx2` or `generic`.
     #[arg(long = "cpu-kernels", value_enum, default_value_t = CpuKernels::Auto)]
     pub cpu: CpuKernels,
     /// Fewest tiles (cubes) a GPU gather launch needs to run tiled (rows sorted by the offsets
@@ -43,21 +46,24 @@ impl Default for KernelOptions {
     }
 }
 
-static GENERIC_CPU: AtomicBool = AtomicBool::new(false);
+/// [`CpuKernels`] as its index in declaration order.
+static CPU: AtomicU8 = AtomicU8::new(0);
+const CPU_CHOICES: [CpuKernels; 3] = [CpuKernels::Auto, CpuKernels::Avx2, CpuKernels::Generic];
 static TILED_MIN_CUBES: AtomicUsize = AtomicUsize::new(DEFAULT_TILED_MIN_CUBES);
 
 impl KernelOptions {
     /// Makes these the options of every later convolution in the process. Set them before the
-    /// first one: results are bit-identical at every thread count for a given choice, not across
-    /// choices.
+    /// first one: results are bit-identical at every thread count for a given choice, and the
+    /// SIMD levels give each other's bits; the general path differs from them in the last bits.
     pub fn apply(self) {
-        GENERIC_CPU.store(self.cpu == CpuKernels::Generic, Ordering::Relaxed);
+        let index = CPU_CHOICES.iter().position(|&c| c == self.cpu).expect("every choice is listed");
+        CPU.store(index as u8, Ordering::Relaxed);
         TILED_MIN_CUBES.store(self.gpu_tiled_min_cubes, Ordering::Relaxed);
     }
 
     /// The options in effect.
     pub fn current() -> Self {
-        let cpu = if GENERIC_CPU.load(Ordering::Relaxed) { CpuKernels::Generic } else { CpuKernels::Auto };
+        let cpu = CPU_CHOICES[CPU.load(Ordering::Relaxed) as usize];
         Self { cpu, gpu_tiled_min_cubes: TILED_MIN_CUBES.load(Ordering::Relaxed) }
     }
 }
@@ -87,9 +93,8 @@ pub fn cpu_features() -> String {
 
 /// Which path the op's f32 CPU kernels take on this machine under the current options.
 pub fn cpu_kernel_path() -> &'static str {
-    #[cfg(target_arch = "x86_64")]
-    if crate::kernels::cpu::avx512_enabled() {
-        return "AVX-512F micro-kernels";
+    match crate::kernels::cpu::level() {
+        Some(level) => level.name(),
+        None => "generic gather–GEMM–scatter (matrixmultiply)",
     }
-    "generic gather–GEMM–scatter (matrixmultiply)"
 }

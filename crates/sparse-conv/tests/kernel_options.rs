@@ -1,5 +1,5 @@
-//! Both CPU kernel choices of `KernelOptions` give the f64 composition's outputs and gradients in
-//! f32, and the choice holds until changed. Its own test binary: the options are process-wide, and
+//! Every CPU kernel choice of `KernelOptions` gives the f64 composition's outputs and gradients in
+//! f32, the SIMD levels each other's bits, and the choice holds until changed. Its own test binary: the options are process-wide, and
 //! the thread-count tests elsewhere compare bits within one choice.
 
 mod common;
@@ -11,7 +11,7 @@ use sparse_conv::burn::tensor::{DType, Device};
 use sparse_conv::{CoordIndex, CpuKernels, KernelMap, KernelOptions};
 
 #[test]
-fn both_cpu_kernel_choices_match_the_f64_result() {
+fn every_cpu_kernel_choice_matches_the_f64_result() {
     let mut r = rng(5);
     let c = [24, 40];
     let coords = random_coords(&mut r, 3_000, 2, 20, 1);
@@ -23,20 +23,27 @@ fn both_cpu_kernel_choices_match_the_f64_result() {
     // f64 runs the general path whatever the options say: the reference.
     let reference = conv_outputs_in(&map, &x, &w, &g, c, &Device::flex(), DType::F64);
     let mut outputs = Vec::new();
-    for cpu in [CpuKernels::Generic, CpuKernels::Auto] {
+    let mut paths = Vec::new();
+    for cpu in [CpuKernels::Generic, CpuKernels::Auto, CpuKernels::Avx2] {
         KernelOptions { cpu, ..Default::default() }.apply();
         assert_eq!(KernelOptions::current().cpu, cpu);
+        paths.push(sparse_conv::cpu_kernel_path());
         let got = conv_outputs_in(&map, &x, &w, &g, c, &Device::flex(), DType::F32);
         for (name, a, b) in [("output", &got.out, &reference.out), ("input gradient", &got.gx, &reference.gx), ("weight gradient", &got.gw, &reference.gw)] {
             assert_close(a, b, 1e-5, &format!("{cpu:?} {name}"));
         }
         outputs.push([got.out, got.gx, got.gw].concat());
     }
+    let same = |a: &[f64], b: &[f64]| a.iter().zip(b).all(|(a, b)| a.to_bits() == b.to_bits());
     #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx512f") {
-        // Two different kernels ran (their sums round differently), so the choice took effect.
-        assert!(outputs[0].iter().zip(&outputs[1]).any(|(a, b)| a.to_bits() != b.to_bits()), "generic and AVX-512 results (output and both gradients) are the same bits");
+    if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+        // A SIMD kernel ran (its sums round differently from the general path's), so the choice
+        // took effect; AVX-512 and AVX2 sum every element's terms in the same order.
+        assert_eq!(paths[2], "AVX2+FMA micro-kernels");
+        assert!(!same(&outputs[0], &outputs[2]), "generic and AVX2 results (output and both gradients) are the same bits");
+        assert!(same(&outputs[1], &outputs[2]), "{} and {} results differ", paths[1], paths[2]);
     }
+    println!("paths: {paths:?}");
     KernelOptions { gpu_tiled_min_cubes: 0, ..Default::default() }.apply();
     assert_eq!(KernelOptions::current(), KernelOptions { cpu: CpuKernels::Auto, gpu_tiled_min_cubes: 0 });
 }

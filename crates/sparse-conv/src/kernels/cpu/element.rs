@@ -143,30 +143,34 @@ pub(crate) fn filled_in_chunks<T: Send>(len: usize, chunk: usize, fill: impl Fn(
     out
 }
 
-/// Whether the AVX-512 kernels run: the CPU has AVX-512F and [`KernelOptions`](crate::KernelOptions)
-/// does not ask for the general path.
-#[cfg(target_arch = "x86_64")]
-pub(crate) fn avx512_enabled() -> bool {
-    crate::KernelOptions::current().cpu == crate::CpuKernels::Auto && std::arch::is_x86_feature_detected!("avx512f")
-}
-
-/// Runs `f` compiled for AVX-512 where the CPU has it (and `KernelOptions` allows it). Plain
-/// loops over channels or elements are vectorized for the features of the function they land
-/// in, so only if LLVM inlines `f` into it: a small closure calling an `#[inline(always)]`
-/// function is (Adam's chunks, the ReLU gradient); the batch-norm passes' row closures were not,
-/// which the binary shows (`zmm` or only `xmm` in the symbol). The default x86-64 target has
-/// 128-bit SSE2 only. Without fused multiply-adds
-/// (Rust never contracts `a·b + c`) the results are the same bits either way.
+/// Runs `f` compiled for the widest SIMD the CPU has (and `KernelOptions` allows). Plain loops
+/// over channels or elements are vectorized for the features of the function they land in, so
+/// only if LLVM inlines `f` into it: a small closure calling an `#[inline(always)]` function is
+/// (Adam's chunks, the ReLU gradient); the batch-norm passes' row closures were not, which the
+/// binary shows (`zmm`/`ymm` or only `xmm` in the symbol). The default x86-64 target has 128-bit
+/// SSE2 only. Without fused multiply-adds (Rust never contracts `a·b + c`) the results are the
+/// same bits either way.
 #[inline(always)]
 pub(crate) fn vectorized<R>(f: impl FnOnce() -> R) -> R {
     #[cfg(target_arch = "x86_64")]
-    if avx512_enabled() {
-        #[target_feature(enable = "avx512f")]
-        unsafe fn with_avx512<R>(f: impl FnOnce() -> R) -> R {
-            f()
+    match super::simd::level() {
+        Some(super::simd::Level::Avx512) => {
+            #[target_feature(enable = "avx512f")]
+            unsafe fn with_avx512<R>(f: impl FnOnce() -> R) -> R {
+                f()
+            }
+            // SAFETY: the CPU has AVX-512F.
+            return unsafe { with_avx512(f) };
         }
-        // SAFETY: the CPU has AVX-512F.
-        return unsafe { with_avx512(f) };
+        Some(super::simd::Level::Avx2) => {
+            #[target_feature(enable = "avx2,fma")]
+            unsafe fn with_avx2<R>(f: impl FnOnce() -> R) -> R {
+                f()
+            }
+            // SAFETY: the CPU has AVX2 and FMA.
+            return unsafe { with_avx2(f) };
+        }
+        None => {}
     }
     f()
 }

@@ -8,19 +8,18 @@
 //!
 //! Layout: [`Element`] (`element`) is what the kernels share and the leaf every other file here
 //! depends on; `conv` and [`norm`] are the general kernels; `native` gives f32 its hooks into
-//! `avx512`, the f32 kernels for x86-64 CPUs with AVX-512F, which fall back on nothing but
-//! `element` and `conv`.
+//! `micro`, the f32 register-tile kernels written once over `simd`'s vector type (AVX-512F,
+//! AVX2 + FMA), which fall back on nothing but `element` and `conv`.
 
 pub mod adam;
-#[cfg(target_arch = "x86_64")]
-mod avx512;
 mod conv;
 mod element;
+mod micro;
 mod native;
 pub mod norm;
+pub(crate) mod simd;
 
 pub use conv::{pair_conv, weight_grad};
 pub use element::{Element, PairDirection, RowEpilogue};
 pub(crate) use element::filled_in_chunks;
-#[cfg(target_arch = "x86_64")]
-pub(crate) use element::avx512_enabled;
+pub(crate) use simd::{Level, level};

@@ -1,9 +1,9 @@
-//! f32, the type training runs in: its GEMM, and its hooks to the AVX-512 kernels where the CPU
-//! has them (the general kernels otherwise).
+//! f32, the type training runs in: its GEMM, and its hooks to the SIMD micro-kernels where the
+//! CPU has them (the general kernels otherwise).
 
-#[cfg(target_arch = "x86_64")]
-use super::element::avx512_enabled;
 use super::element::{Element, PairDirection, RowEpilogue};
+use super::micro::{self, at_level};
+use super::simd::level;
 use crate::geometry::kernel_map::OffsetPairs;
 
 impl Element for f32 {
@@ -27,26 +27,26 @@ impl Element for f32 {
         f32::sqrt(self)
     }
 
-    #[cfg(target_arch = "x86_64")]
     fn weight_grad_native(x: &[f32], c_in: usize, grad_out: &[f32], c_out: usize, pairs: &OffsetPairs) -> Option<Vec<f32>> {
-        avx512_enabled().then(|| super::avx512::weight_grad(x, c_in, grad_out, c_out, pairs))
+        let level = level()?;
+        Some(at_level!(level, |V| micro::weight_grad::<V>(x, c_in, grad_out, c_out, pairs)))
     }
 
-    #[cfg(target_arch = "x86_64")]
     fn stats_sums_native(x: &[f32], c: usize, shift: &[f32]) -> Option<Vec<f64>> {
-        avx512_enabled().then(|| super::avx512::stats_sums(x, c, shift))
+        let level = level()?;
+        Some(at_level!(level, |V| micro::stats_sums::<V>(x, c, shift)))
     }
 
-    #[cfg(target_arch = "x86_64")]
     fn param_sums_native(x: &[f32], g: &[f32], c: usize, a: &[f32], b: &[f32], mean: &[f32], relu: bool) -> Option<Vec<f64>> {
-        avx512_enabled().then(|| super::avx512::param_sums(x, g, c, a, b, mean, relu))
+        let level = level()?;
+        Some(at_level!(level, |V| micro::param_sums::<V>(x, g, c, a, b, mean, relu)))
     }
 
-    #[cfg(target_arch = "x86_64")]
     fn pair_conv_native(
         src: &[f32], c_src: usize, weight: &[f32], c_dst: usize, n_dst: usize,
         direction: PairDirection, pairs: &OffsetPairs, identity: Option<usize>, epilogue: Option<&dyn RowEpilogue<f32>>,
     ) -> Option<Vec<f32>> {
-        avx512_enabled().then(|| super::avx512::pair_conv(src, c_src, weight, c_dst, n_dst, direction, pairs, identity, epilogue))
+        let level = level()?;
+        Some(at_level!(level, |V| micro::pair_conv::<V>(src, c_src, weight, c_dst, n_dst, direction, pairs, identity, epilogue)))
     }
 }

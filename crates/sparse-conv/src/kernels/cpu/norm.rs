@@ -87,8 +87,8 @@ fn lane_groups<T: Element>(v: &[T]) -> Vec<[T; LANES]> {
 /// sums stay in registers over the block's rows; every channel still sums its rows in row order,
 /// as one row at a time would. Returns `[s1.., s2..]`.
 ///
-/// On AVX-512 CPUs f32 runs kernels of its own ([`Element::stats_sums_native`]), so these loops
-/// serve f64 and other CPUs.
+/// On CPUs with AVX-512 or AVX2 + FMA f32 runs kernels of its own
+/// ([`Element::stats_sums_native`]), so these loops serve f64 and other CPUs.
 fn block_sums<T: Element>(c: usize, x: &[T], y: &[T], add: impl Fn(usize, &[T; LANES], &[T; LANES], &mut [T; LANES], &mut [T; LANES])) -> Vec<f64> {
     let n = x.len() / c;
     let groups = c.div_ceil(LANES);
@@ -415,22 +415,30 @@ mod tests {
         assert!((stats[1] - 0.25).abs() < 1e-6, "var {}", stats[1]);
     }
 
-    /// The AVX-512 sums are the general loops' bits: partial lane groups (37 channels) and
-    /// blocks (1005 rows), a single group, three channels; with and without ReLU.
+    /// Every SIMD level's sums are the general loops' bits: partial lane groups (37 channels)
+    /// and blocks (1005 rows), a single group, three channels; with and without ReLU, with a NaN
+    /// input (whose gradient ReLU keeps).
     #[test]
-    fn native_sums_are_the_general_loops_bits() {
-        for &(n, c) in &[(1005, 37), (64, 16), (33, 3)] {
-            let x: Vec<f32> = (0..n * c).map(|i| ((i * 7919 % 1000) as f32 - 400.0) / 300.0).collect();
-            let g: Vec<f32> = (0..n * c).map(|i| ((i * 104729 % 997) as f32 - 500.0) / 500.0).collect();
-            let shift = &x[..c];
-            let Some(native) = f32::stats_sums_native(&x, c, shift) else { return };
-            assert!(native == stats_sums(&x, c, &lane_groups(shift)), "channel sums, {n} × {c}");
-            let stats = channel_stats(&x, c);
-            let (a, b): (Vec<f32>, Vec<f32>) = (0..c).map(|j| (0.5 + j as f32 * 0.1, j as f32 * 0.05 - 0.3)).unzip();
-            let lanes = [lane_groups(&a), lane_groups(&b), lane_groups(&stats[..c])];
-            for relu in [true, false] {
-                let native = f32::param_sums_native(&x, &g, c, &a, &b, &stats[..c], relu).unwrap();
-                assert!(native == param_sums(&x, &g, c, &lanes, relu), "parameter sums, {n} × {c}, ReLU {relu}");
+    fn simd_sums_are_the_general_loops_bits() {
+        use super::super::micro::{at_level, param_sums as simd_param_sums, stats_sums as simd_stats_sums};
+        for level in super::super::simd::supported() {
+            for &(n, c) in &[(1005, 37), (64, 16), (33, 3)] {
+                let mut x: Vec<f32> = (0..n * c).map(|i| ((i * 7919 % 1000) as f32 - 400.0) / 300.0).collect();
+                let g: Vec<f32> = (0..n * c).map(|i| ((i * 104729 % 997) as f32 - 500.0) / 500.0).collect();
+                let shift = x[..c].to_vec();
+                let simd = at_level!(level, |V| simd_stats_sums::<V>(&x, c, &shift));
+                assert!(simd == stats_sums(&x, c, &lane_groups(&shift)), "{level:?} channel sums, {n} × {c}");
+                let stats = channel_stats(&x, c);
+                x[n * c / 2] = f32::NAN;
+                let (a, b): (Vec<f32>, Vec<f32>) = (0..c).map(|j| (0.5 + j as f32 * 0.1, j as f32 * 0.05 - 0.3)).unzip();
+                let lanes = [lane_groups(&a), lane_groups(&b), lane_groups(&stats[..c])];
+                for relu in [true, false] {
+                    let simd = at_level!(level, |V| simd_param_sums::<V>(&x, &g, c, &a, &b, &stats[..c], relu));
+                    let general = param_sums(&x, &g, c, &lanes, relu);
+                    // NaN ≠ NaN: compare the bits.
+                    let bits = |v: &[f64]| v.iter().map(|f| f.to_bits()).collect::<Vec<_>>();
+                    assert!(bits(&simd) == bits(&general), "{level:?} parameter sums, {n} × {c}, ReLU {relu}");
+                }
             }
         }
     }

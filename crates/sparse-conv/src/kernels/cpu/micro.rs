@@ -1,4 +1,5 @@
-//! The op's f32 kernels for x86-64 CPUs with AVX-512.
+//! The op's f32 register-tile kernels, written once over the vector width ([`Simd`]) and
+//! compiled for each instruction set the build targets (AVX-512F, AVX2 + FMA).
 //!
 //! - Weight gradient: the micro-kernel reads each pair's input and output-gradient rows in
 //!   place, through the kernel map, and accumulates the outer products in registers. The
@@ -7,61 +8,45 @@
 //! - Forward and feature gradient ([`pair_conv`]): by destination blocks when each offset's
 //!   pairs come ordered by destination row (as [`crate::KernelMap::pairs`] and
 //!   [`crate::KernelMap::pairs_by_input`] give them): a task owns a block of output rows and, for
-//!   every offset, multiplies the source rows of the pairs landing in it, read in place 12 at a
-//!   time, with `W_k` packed once per call into 32-column panels, and adds each register tile
-//!   straight into the block's rows, which stay in L2 from one offset to the next; one parallel
-//!   region per call. The next 12 source rows are prefetched while a tile runs: without that,
-//!   reading in place was slower than gathering the rows into a tile first (their scattered
-//!   first reads stalled the FMAs); with it, faster than the gather. Scattered rows written over
-//!   rather than added to (an up forward's) are asked for, to write, in the same way, and a
-//!   submanifold block asks for the next block's rows (which its identity offset reads and
-//!   writes first) while its own offsets run. Pairs in another order run offset by offset, in
+//!   every offset, multiplies the source rows of the pairs landing in it, read in place `MR` at a
+//!   time, with `W_k` packed once per call into panels two vectors wide, and adds each register
+//!   tile straight into the block's rows, which stay in L2 from one offset to the next; one
+//!   parallel region per call. The next tile's source rows are prefetched while a tile runs:
+//!   without that, reading in place was slower than gathering the rows into a tile first (their
+//!   scattered first reads stalled the FMAs); with it, faster than the gather. Scattered rows
+//!   written over rather than added to (an up forward's) are asked for, to write, in the same
+//!   way, and a submanifold block asks for the next block's rows (which its identity offset reads
+//!   and writes first) while its own offsets run. Pairs in another order run offset by offset, in
 //!   chunks, gathered. The general path copies each tile again (matrixmultiply's packing),
 //!   repacks `W_k` for every chunk, and adds a product buffer in a pass of its own.
 //!
 //! Every output element is its first term (or zero) plus each later offset's product in offset
-//! order, each product summed in registers the same way on every path and at any block size, so
-//! results are bit-identical at any thread count (they differ from the general path's in the
-//! last bits: its products sum their terms in another order).
-
-use std::arch::x86_64::*;
+//! order, each product one fused multiply-add per term in that element's lane, the same way on
+//! every path, at any block size and at any vector width, so results are bit-identical at any
+//! thread count and on every instruction set (they differ from the general path's in the last
+//! bits: its products sum their terms in another order).
+//!
+//! The micro-kernels are generic bodies; [`TileKernels`] is each instruction set's set of entry
+//! points, functions compiled with its target features into which the bodies and the vector
+//! operations inline.
 
 use rayon::prelude::*;
 
 use super::conv::grad_chunks;
-use super::element::{PairDirection, RowEpilogue, assume_init, avx512_enabled, scratch};
+use super::element::{PairDirection, RowEpilogue, assume_init, scratch};
+use super::simd::{Hint, Simd, prefetch};
 use crate::geometry::kernel_map::OffsetPairs;
 use crate::parallel::SyncPtr;
 
-/// Columns per tile: two 16-lane vectors.
-const NR: usize = 32;
-/// Rows per tile: 12 × 2 accumulators, 2 gradient vectors and a broadcast fit the 32 vector
-/// registers.
-const MR: usize = 12;
+/// Columns per tile: two vectors.
+const fn nr<V: Simd>() -> usize {
+    2 * V::LANES
+}
+/// The most rows any instruction set's tile has ([`Simd::MR`]): the size of the row-pointer
+/// arrays.
+const MAX_MR: usize = 12;
 /// Pairs per block: their rows stay in L1 while every tile of the partial passes over them.
 const PAIR_BLOCK: usize = 32;
-
-
-/// The float at `p` in every lane. (Through a load intrinsic rather than `*p`, and with
-/// `wrapping_add` in the loops: the dev profile keeps debug assertions, whose pointer checks on
-/// every dereference and `add` would sit in the innermost loop.)
-///
-/// # Safety
-/// AVX-512F; `p` readable.
-#[inline(always)]
-unsafe fn broadcast(p: *const f32) -> __m512 {
-    unsafe { _mm512_broadcastss_ps(_mm_load_ss(p)) }
-}
-
-/// The 16 floats at `p`. (A masked load: `_mm512_loadu_ps` is a `read_unaligned`, whose
-/// debug-assertion check and stack copy would sit in the innermost loop.)
-///
-/// # Safety
-/// AVX-512F; 16 floats readable at `p`.
-#[inline(always)]
-unsafe fn load(p: *const f32) -> __m512 {
-    unsafe { _mm512_maskz_loadu_ps(0xFFFF, p) }
-}
 
 /// The cache lines of a list of rows, asked for into L1 a few at a time: spread over the work
 /// they overlap, the requests do not queue up behind the line-fill buffers all at once.
@@ -72,17 +57,6 @@ struct RowPrefetch<'a> {
     row: usize,
     line: usize,
     hint: Hint,
-}
-
-/// What a [`RowPrefetch`] asks its lines for.
-#[derive(Clone, Copy)]
-enum Hint {
-    /// To read next: into L1 (T0).
-    Read,
-    /// To read later than the next tile: into L2 (T1).
-    ReadLater,
-    /// To write (PREFETCHW): the line comes in owned, so the stores that follow do not wait for it.
-    Write,
 }
 
 impl<'a> RowPrefetch<'a> {
@@ -105,13 +79,7 @@ impl<'a> RowPrefetch<'a> {
         for _ in 0..count {
             let Some(&row) = self.rows.get(self.row) else { return };
             let p = row.wrapping_add(self.line);
-            // SAFETY: a prefetch of any address is harmless; T0 and T1 are SSE (any x86-64 CPU),
-            // PREFETCHW is on every CPU with AVX-512F.
-            match self.hint {
-                Hint::Read => unsafe { _mm_prefetch::<_MM_HINT_T0>(p.cast()) },
-                Hint::ReadLater => unsafe { _mm_prefetch::<_MM_HINT_T1>(p.cast()) },
-                Hint::Write => unsafe { std::arch::asm!("prefetchw [{p}]", p = in(reg) p, options(nostack, readonly, preserves_flags)) },
-            }
+            prefetch(p, self.hint);
             self.line += 16;
             if self.line >= self.len {
                 (self.row, self.line) = (self.row + 1, 0);
@@ -150,42 +118,43 @@ impl<'a> BlockAhead<'a> {
     }
 }
 
-/// Lane mask of vector `v` of a tile whose first `cols` columns are real.
-fn mask(cols: usize, v: usize) -> __mmask16 {
-    let c = cols.saturating_sub(16 * v);
-    if c >= 16 { 0xFFFF } else { ((1u32 << c) - 1) as u16 }
+/// The lane masks of a tile's two vectors when its first `cols` columns are real.
+#[inline(always)]
+fn masks<V: Simd>(cols: usize) -> [V::Mask; 2] {
+    [V::mask(cols), V::mask(cols.saturating_sub(V::LANES))]
 }
 
-/// Adds a register row (two vectors, lanes `m0`, `m1`) to the 32 floats at `o`, or, without
+/// Adds a register row (two vectors, lanes `m`) to the floats at `o`, or, without
 /// `accumulate`, writes it there: the end of every micro-kernel here.
 ///
 /// # Safety
-/// AVX-512F; the masked lanes at `o` writable (and, to accumulate, initialised).
+/// `V`'s instructions; the masked lanes at `o` writable (and, to accumulate, initialised).
 #[inline(always)]
-unsafe fn store_row(o: *mut f32, acc: [__m512; 2], m0: __mmask16, m1: __mmask16, accumulate: bool) {
+unsafe fn store_row<V: Simd>(o: *mut f32, acc: [V::V; 2], m: [V::Mask; 2], accumulate: bool) {
     unsafe {
         let (mut v0, mut v1) = (acc[0], acc[1]);
+        let o1 = o.wrapping_add(V::LANES);
         if accumulate {
-            v0 = _mm512_add_ps(_mm512_maskz_loadu_ps(m0, o), v0);
-            v1 = _mm512_add_ps(_mm512_maskz_loadu_ps(m1, o.add(16)), v1);
+            v0 = V::add(V::load_masked(m[0], o), v0);
+            v1 = V::add(V::load_masked(m[1], o1), v1);
         }
-        _mm512_mask_storeu_ps(o, m0, v0);
-        _mm512_mask_storeu_ps(o.add(16), m1, v1);
+        V::store_masked(o, m[0], v0);
+        V::store_masked(o1, m[1], v1);
     }
 }
 
-/// `out[i][j] (+)= (Σ_p x[p][i] · g[p][j])` for `R` rows `i0..i0 + R` and the `cols` (≤ 32)
-/// columns from `j0`, over the pairs' rows `xs[p]`, `gs[p]`; with `accumulate` false `out` is
-/// written without being read.
+/// `out[i][j] (+)= (Σ_p x[p][i] · g[p][j])` for `R` rows `i0..i0 + R` and the `cols` (≤ two
+/// vectors) columns from `j0`, over the pairs' rows `xs[p]`, `gs[p]`; with `accumulate` false
+/// `out` is written without being read.
 ///
 /// # Safety
-/// AVX-512F; `xs[p]` readable up to `i0 + R`, `gs[p]` up to `j0 + cols`, `out` rows of `ld`
-/// floats writable (and, to accumulate, initialised) at `i0.., j0..`.
+/// `V`'s instructions; `xs[p]` readable up to `i0 + R`, `gs[p]` up to `j0 + cols`, `out` rows
+/// of `ld` floats writable (and, to accumulate, initialised) at `i0.., j0..`.
 // The register tile is indexed by constant-bounded loops that unroll into registers.
 #[allow(clippy::needless_range_loop)]
-#[target_feature(enable = "avx512f")]
 #[allow(clippy::too_many_arguments)]
-unsafe fn pair_outer_products<const R: usize>(
+#[inline(always)]
+unsafe fn pair_outer_products<V: Simd, const R: usize>(
     xs: &[*const f32],
     gs: &[*const f32],
     i0: usize,
@@ -196,52 +165,53 @@ unsafe fn pair_outer_products<const R: usize>(
     accumulate: bool,
 ) {
     unsafe {
-        let (m0, m1) = (mask(cols, 0), mask(cols, 1));
-        let mut acc = [[_mm512_setzero_ps(); 2]; R];
+        let m = masks::<V>(cols);
+        let mut acc = [[V::zero(); 2]; R];
         for (&x, &g) in xs.iter().zip(gs) {
             let g = g.wrapping_add(j0);
-            let b0 = _mm512_maskz_loadu_ps(m0, g);
-            let b1 = _mm512_maskz_loadu_ps(m1, g.wrapping_add(16));
+            let b0 = V::load_masked(m[0], g);
+            let b1 = V::load_masked(m[1], g.wrapping_add(V::LANES));
             let x = x.wrapping_add(i0);
             for r in 0..R {
-                let a = broadcast(x.wrapping_add(r));
-                acc[r][0] = _mm512_fmadd_ps(a, b0, acc[r][0]);
-                acc[r][1] = _mm512_fmadd_ps(a, b1, acc[r][1]);
+                let a = V::splat(x.wrapping_add(r));
+                acc[r][0] = V::fmadd(a, b0, acc[r][0]);
+                acc[r][1] = V::fmadd(a, b1, acc[r][1]);
             }
         }
         for (r, &acc) in acc.iter().enumerate() {
-            store_row(out.add((i0 + r) * ld + j0), acc, m0, m1, accumulate);
+            store_row::<V>(out.add((i0 + r) * ld + j0), acc, m, accumulate);
         }
     }
 }
 
 /// `out_r[..cols] (+)= Σ_kk a[r·lda + kk] · panel[kk][..cols]` for `R` rows: a row tile times
-/// one 32-column panel of a packed weight, each row's sums added to (or, without `accumulate`,
-/// written over) its own destination.
+/// one panel (two vectors wide) of a packed weight, each row's sums added to (or, without
+/// `accumulate`, written over) its own destination.
 ///
 /// # Safety
-/// AVX-512F; `a` readable for `R` rows of `lda ≥ kc` floats, `panel` for `kc` rows of 32, each
-/// `out[r]` writable (and, to accumulate, initialised) for `cols ≤ 32` floats.
+/// `V`'s instructions; `a` readable for `R` rows of `lda ≥ kc` floats, `panel` for `kc` rows of
+/// two vectors, each `out[r]` writable (and, to accumulate, initialised) for `cols` floats.
 #[allow(clippy::needless_range_loop)]
-#[target_feature(enable = "avx512f")]
-unsafe fn tile_times_panel<const R: usize>(a: *const f32, lda: usize, kc: usize, panel: *const f32, out: &[*mut f32], cols: usize, accumulate: bool) {
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+unsafe fn tile_times_panel<V: Simd, const R: usize>(a: *const f32, lda: usize, kc: usize, panel: *const f32, out: &[*mut f32], cols: usize, accumulate: bool) {
     unsafe {
-        let (m0, m1) = (mask(cols, 0), mask(cols, 1));
-        let mut acc = [[_mm512_setzero_ps(); 2]; R];
+        let m = masks::<V>(cols);
+        let mut acc = [[V::zero(); 2]; R];
         let (mut a, mut panel) = (a, panel);
         for _ in 0..kc {
-            let b0 = load(panel);
-            let b1 = load(panel.wrapping_add(16));
+            let b0 = V::load(panel);
+            let b1 = V::load(panel.wrapping_add(V::LANES));
             for r in 0..R {
-                let x = broadcast(a.wrapping_add(r * lda));
-                acc[r][0] = _mm512_fmadd_ps(x, b0, acc[r][0]);
-                acc[r][1] = _mm512_fmadd_ps(x, b1, acc[r][1]);
+                let x = V::splat(a.wrapping_add(r * lda));
+                acc[r][0] = V::fmadd(x, b0, acc[r][0]);
+                acc[r][1] = V::fmadd(x, b1, acc[r][1]);
             }
             a = a.wrapping_add(1);
-            panel = panel.wrapping_add(NR);
+            panel = panel.wrapping_add(nr::<V>());
         }
         for r in 0..R {
-            store_row(out[r], acc[r], m0, m1, accumulate);
+            store_row::<V>(out[r], acc[r], m, accumulate);
         }
     }
 }
@@ -251,29 +221,130 @@ unsafe fn tile_times_panel<const R: usize>(a: *const f32, lda: usize, kc: usize,
 /// # Safety
 /// As [`tile_times_panel`], each `rows[r]` readable for `kc` floats.
 #[allow(clippy::needless_range_loop)]
-#[target_feature(enable = "avx512f")]
-unsafe fn rows_times_panel<const R: usize>(rows: &[*const f32], kc: usize, panel: *const f32, out: &[*mut f32], cols: usize, accumulate: bool) {
+#[inline(always)]
+unsafe fn rows_times_panel<V: Simd, const R: usize>(rows: &[*const f32], kc: usize, panel: *const f32, out: &[*mut f32], cols: usize, accumulate: bool) {
     unsafe {
-        let (m0, m1) = (mask(cols, 0), mask(cols, 1));
-        let mut acc = [[_mm512_setzero_ps(); 2]; R];
+        let m = masks::<V>(cols);
+        let mut acc = [[V::zero(); 2]; R];
         let mut a = [std::ptr::null::<f32>(); R];
         a.copy_from_slice(&rows[..R]);
         let mut panel = panel;
         for kk in 0..kc {
-            let b0 = load(panel);
-            let b1 = load(panel.wrapping_add(16));
+            let b0 = V::load(panel);
+            let b1 = V::load(panel.wrapping_add(V::LANES));
             for r in 0..R {
-                let x = broadcast(a[r].wrapping_add(kk));
-                acc[r][0] = _mm512_fmadd_ps(x, b0, acc[r][0]);
-                acc[r][1] = _mm512_fmadd_ps(x, b1, acc[r][1]);
+                let x = V::splat(a[r].wrapping_add(kk));
+                acc[r][0] = V::fmadd(x, b0, acc[r][0]);
+                acc[r][1] = V::fmadd(x, b1, acc[r][1]);
             }
-            panel = panel.wrapping_add(NR);
+            panel = panel.wrapping_add(nr::<V>());
         }
         for r in 0..R {
-            store_row(out[r], acc[r], m0, m1, accumulate);
+            store_row::<V>(out[r], acc[r], m, accumulate);
         }
     }
 }
+
+/// One instruction set's entry points: each runs the generic body of the same name compiled with
+/// the set's target features, so that the body and its vector operations inline into it.
+///
+/// # Safety
+/// Callable only on a CPU with the instruction set.
+pub(crate) unsafe trait TileKernels: Simd {
+    /// Whether this CPU has the instruction set.
+    fn available() -> bool;
+    /// [`pair_outer_products`].
+    #[allow(clippy::too_many_arguments)]
+    unsafe fn pair_outer_products<const R: usize>(xs: &[*const f32], gs: &[*const f32], i0: usize, j0: usize, cols: usize, out: *mut f32, ld: usize, accumulate: bool);
+    /// [`tile_times_panel`].
+    #[allow(clippy::too_many_arguments)]
+    unsafe fn tile_times_panel<const R: usize>(a: *const f32, lda: usize, kc: usize, panel: *const f32, out: &[*mut f32], cols: usize, accumulate: bool);
+    /// [`rows_times_panel`].
+    unsafe fn rows_times_panel<const R: usize>(rows: &[*const f32], kc: usize, panel: *const f32, out: &[*mut f32], cols: usize, accumulate: bool);
+    /// [`stats_block`].
+    unsafe fn stats_block(x: &[f32], c: usize, shift: &[f32], total: &mut [f64]);
+    /// [`param_block`].
+    #[allow(clippy::too_many_arguments)]
+    unsafe fn param_block(x: &[f32], g: &[f32], c: usize, a: &[f32], b: &[f32], mean: &[f32], relu: bool, total: &mut [f64]);
+}
+
+/// Implements [`TileKernels`] for an instruction set `$isa` whose target features are `$features`.
+macro_rules! tile_kernels {
+    ($isa:ty, $features:literal, $detected:expr) => {
+        // SAFETY: every entry point is compiled for `$features`, which `available` tests.
+        unsafe impl TileKernels for $isa {
+            fn available() -> bool {
+                $detected
+            }
+            #[target_feature(enable = $features)]
+            unsafe fn pair_outer_products<const R: usize>(xs: &[*const f32], gs: &[*const f32], i0: usize, j0: usize, cols: usize, out: *mut f32, ld: usize, accumulate: bool) {
+                unsafe { self::pair_outer_products::<Self, R>(xs, gs, i0, j0, cols, out, ld, accumulate) }
+            }
+            #[target_feature(enable = $features)]
+            unsafe fn tile_times_panel<const R: usize>(a: *const f32, lda: usize, kc: usize, panel: *const f32, out: &[*mut f32], cols: usize, accumulate: bool) {
+                unsafe { self::tile_times_panel::<Self, R>(a, lda, kc, panel, out, cols, accumulate) }
+            }
+            #[target_feature(enable = $features)]
+            unsafe fn rows_times_panel<const R: usize>(rows: &[*const f32], kc: usize, panel: *const f32, out: &[*mut f32], cols: usize, accumulate: bool) {
+                unsafe { self::rows_times_panel::<Self, R>(rows, kc, panel, out, cols, accumulate) }
+            }
+            #[target_feature(enable = $features)]
+            unsafe fn stats_block(x: &[f32], c: usize, shift: &[f32], total: &mut [f64]) {
+                unsafe { self::stats_block::<Self>(x, c, shift, total) }
+            }
+            #[target_feature(enable = $features)]
+            unsafe fn param_block(x: &[f32], g: &[f32], c: usize, a: &[f32], b: &[f32], mean: &[f32], relu: bool, total: &mut [f64]) {
+                unsafe { self::param_block::<Self>(x, g, c, a, b, mean, relu, total) }
+            }
+        }
+    };
+}
+
+#[cfg(target_arch = "x86_64")]
+tile_kernels!(super::simd::Avx512, "avx512f", std::arch::is_x86_feature_detected!("avx512f"));
+#[cfg(target_arch = "x86_64")]
+tile_kernels!(super::simd::Avx2, "avx2,fma", std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma"));
+
+/// Runs `$call` with `$r` a constant equal to `$rows` (1 ..= [`MAX_MR`]): the row count of a
+/// tile, a const parameter of the micro-kernels.
+macro_rules! by_rows {
+    ($rows:expr, |$r:ident| $call:expr) => {
+        match $rows {
+            1 => { const $r: usize = 1; $call }
+            2 => { const $r: usize = 2; $call }
+            3 => { const $r: usize = 3; $call }
+            4 => { const $r: usize = 4; $call }
+            5 => { const $r: usize = 5; $call }
+            6 => { const $r: usize = 6; $call }
+            7 => { const $r: usize = 7; $call }
+            8 => { const $r: usize = 8; $call }
+            9 => { const $r: usize = 9; $call }
+            10 => { const $r: usize = 10; $call }
+            11 => { const $r: usize = 11; $call }
+            12 => { const $r: usize = 12; $call }
+            _ => unreachable!("at most MAX_MR rows per tile"),
+        }
+    };
+}
+
+/// Runs `$call` with `$v` the instruction set of `$level` (a [`Level`](super::simd::Level)).
+macro_rules! at_level {
+    ($level:expr, |$v:ident| $call:expr) => {
+        match $level {
+            #[cfg(target_arch = "x86_64")]
+            $crate::kernels::cpu::Level::Avx512 => {
+                type $v = $crate::kernels::cpu::simd::Avx512;
+                $call
+            }
+            #[cfg(target_arch = "x86_64")]
+            $crate::kernels::cpu::Level::Avx2 => {
+                type $v = $crate::kernels::cpu::simd::Avx2;
+                $call
+            }
+        }
+    };
+}
+pub(crate) use at_level;
 
 /// Rows per chunk of an offset's pairs in [`pair_conv`]: the unit of parallel work, whose
 /// gathered tile stays in L2 while every panel passes over it.
@@ -286,31 +357,32 @@ const MIN_BLOCK_ROWS: usize = 64;
 const MAX_BLOCK_ROWS: usize = 512;
 
 /// Every offset's `[c_src, c_dst]` matrix (`W_k`, or `W_kᵀ` read through the strides
-/// `(rs, cs)` of its rows and columns: `(c_dst, 1)` or `(1, c_src)`) packed as 32-column panels:
-/// panel `p` of offset `k` holds `kc` rows of 32 floats (zero past `c_dst`), at
-/// `(k·panels + p)·c_src·32`.
-fn pack_panels(weight: &[f32], volume: usize, c_src: usize, c_dst: usize, rs: usize, cs: usize) -> Vec<f32> {
-    let panels = c_dst.div_ceil(NR);
-    let mut packed = vec![0.0f32; volume * panels * c_src * NR];
+/// `(rs, cs)` of its rows and columns: `(c_dst, 1)` or `(1, c_src)`) packed as panels of
+/// `nr` (two vectors) columns: panel `p` of offset `k` holds `kc` rows of `nr` floats (zero past
+/// `c_dst`), at `(k·panels + p)·c_src·nr`.
+fn pack_panels<V: Simd>(weight: &[f32], volume: usize, c_src: usize, c_dst: usize, rs: usize, cs: usize) -> Vec<f32> {
+    let nr = nr::<V>();
+    let panels = c_dst.div_ceil(nr);
+    let mut packed = vec![0.0f32; volume * panels * c_src * nr];
     if packed.is_empty() {
         return packed;
     }
-    packed.par_chunks_mut(panels * c_src * NR).enumerate().for_each(|(k, dst)| {
+    packed.par_chunks_mut(panels * c_src * nr).enumerate().for_each(|(k, dst)| {
         let w = &weight[k * c_src * c_dst..][..c_src * c_dst];
-        for (p, panel) in dst.chunks_exact_mut(c_src * NR).enumerate() {
-            let cols = NR.min(c_dst - p * NR);
+        for (p, panel) in dst.chunks_exact_mut(c_src * nr).enumerate() {
+            let cols = nr.min(c_dst - p * nr);
             if cs == 1 {
                 // W_k: each panel row is a piece of a weight row.
-                for (kk, row) in panel.chunks_exact_mut(NR).enumerate() {
-                    row[..cols].copy_from_slice(&w[kk * rs + p * NR..][..cols]);
+                for (kk, row) in panel.chunks_exact_mut(nr).enumerate() {
+                    row[..cols].copy_from_slice(&w[kk * rs + p * nr..][..cols]);
                 }
             } else {
                 // W_kᵀ: read the weight by rows (a panel column each), write the panel, which
                 // stays in L1, by columns.
                 debug_assert_eq!(rs, 1, "a weight read by rows or by columns");
                 for j in 0..cols {
-                    for (kk, &v) in w[(p * NR + j) * cs..][..c_src].iter().enumerate() {
-                        panel[kk * NR + j] = v;
+                    for (kk, &v) in w[(p * nr + j) * cs..][..c_src].iter().enumerate() {
+                        panel[kk * nr + j] = v;
                     }
                 }
             }
@@ -321,7 +393,7 @@ fn pack_panels(weight: &[f32], volume: usize, c_src: usize, c_dst: usize, rs: us
 
 /// [`pair_conv`](super::pair_conv) for f32 on AVX-512; same arguments and result, up to rounding.
 #[allow(clippy::too_many_arguments)]
-pub fn pair_conv(
+pub(crate) fn pair_conv<V: TileKernels>(
     src: &[f32],
     c_src: usize,
     weight: &[f32],
@@ -332,7 +404,8 @@ pub fn pair_conv(
     identity: Option<usize>,
     epilogue: Option<&dyn RowEpilogue<f32>>,
 ) -> Vec<f32> {
-    assert!(avx512_enabled(), "AVX-512F kernels called on a CPU without AVX-512F");
+    assert!(V::available(), "{} called on a CPU without them", V::NAME);
+    let (nr, mr) = (nr::<V>(), V::MR);
     let volume = pairs.start.len() - 1;
     assert_eq!(weight.len(), volume * c_src * c_dst, "weight does not match the map and channels");
     if n_dst == 0 || c_dst == 0 {
@@ -347,9 +420,9 @@ pub fn pair_conv(
         PairDirection::Forward => (&pairs.input, &pairs.output),
         PairDirection::Backward => (&pairs.output, &pairs.input),
     };
-    let panels = c_dst.div_ceil(NR);
-    let packed = pack_panels(weight, volume, c_src, c_dst, rs, cs);
-    let panel_of = |k: usize, p: usize| packed[(k * panels + p) * c_src * NR..].as_ptr();
+    let panels = c_dst.div_ceil(nr);
+    let packed = pack_panels::<V>(weight, volume, c_src, c_dst, rs, cs);
+    let panel_of = |k: usize, p: usize| packed[(k * panels + p) * c_src * nr..].as_ptr();
     let mut out = scratch::<f32>(n_dst * c_dst);
     let out_ptr = SyncPtr(out.as_mut_ptr().cast::<f32>());
     let out_ptr = &out_ptr;
@@ -358,12 +431,12 @@ pub fn pair_conv(
     // offset (`dst` empty), `first + r`; without `accumulate` it writes them.
     let multiply = |k: usize, panel_range: std::ops::Range<usize>, tile: *const f32, lda: usize, m: usize, dst: &[u32], first: usize, accumulate: bool| {
         let dst = |r: usize| if dst.is_empty() { first + r } else { dst[r] as usize };
-        let mut rows = [std::ptr::null_mut::<f32>(); MR];
+        let mut rows = [std::ptr::null_mut::<f32>(); MAX_MR];
         for p in panel_range {
-            let (j0, panel) = (p * NR, panel_of(k, p));
-            let cols = NR.min(c_dst - j0);
-            for r0 in (0..m).step_by(MR) {
-                let r_count = MR.min(m - r0);
+            let (j0, panel) = (p * nr, panel_of(k, p));
+            let cols = nr.min(c_dst - j0);
+            for r0 in (0..m).step_by(mr) {
+                let r_count = mr.min(m - r0);
                 for (r, row) in rows.iter_mut().enumerate().take(r_count) {
                     // SAFETY: destination rows are < n_dst.
                     *row = unsafe { out_ptr.0.add(dst(r0 + r) * c_dst + j0) };
@@ -371,15 +444,7 @@ pub fn pair_conv(
                 // SAFETY: the tile holds m rows of lda ≥ c_src floats, the panel c_src rows of
                 // 32; destination rows are written by this call only (see below).
                 let a = unsafe { tile.add(r0 * lda) };
-                macro_rules! rows {
-                    ($($r:literal)*) => {
-                        match r_count {
-                            $($r => unsafe { tile_times_panel::<$r>(a, lda, c_src, panel, &rows[..$r], cols, accumulate) },)*
-                            _ => unreachable!(),
-                        }
-                    };
-                }
-                rows!(1 2 3 4 5 6 7 8 9 10 11 12);
+                by_rows!(r_count, |R| unsafe { V::tile_times_panel::<R>(a, lda, c_src, panel, &rows[..R], cols, accumulate) });
             }
         }
     };
@@ -392,12 +457,12 @@ pub fn pair_conv(
     // `contiguous` (the identity), source row i is `srcs[0] + i·c_src` and `dst[i]` is
     // `dst[0] + i`.
     let multiply_in_place = |k: usize, srcs: &[*const f32], dst: &[u32], contiguous: bool, accumulate: bool, ahead: &mut BlockAhead<'_>| {
-        let mut outs = [std::ptr::null_mut::<f32>(); MR];
-        let mut next_outs = [std::ptr::null::<f32>(); MR];
-        for r0 in (0..srcs.len()).step_by(MR) {
-            let r_count = MR.min(srcs.len() - r0);
+        let mut outs = [std::ptr::null_mut::<f32>(); MAX_MR];
+        let mut next_outs = [std::ptr::null::<f32>(); MAX_MR];
+        for r0 in (0..srcs.len()).step_by(mr) {
+            let r_count = mr.min(srcs.len() - r0);
             // The identity's rows were asked for a block ahead ([`BlockAhead`]).
-            let next = if contiguous { r0..r0 } else { (r0 + MR).min(srcs.len())..(r0 + 2 * MR).min(srcs.len()) };
+            let next = if contiguous { r0..r0 } else { (r0 + mr).min(srcs.len())..(r0 + 2 * mr).min(srcs.len()) };
             let next_written = if accumulate { 0 } else { next.len() };
             for (o, &r) in next_outs.iter_mut().zip(&dst[next.clone()]).take(next_written) {
                 *o = out_ptr.0.wrapping_add(r as usize * c_dst);
@@ -406,8 +471,8 @@ pub fn pair_conv(
             let mut prefetch_out = RowPrefetch::with_hint(&next_outs[..next_written], c_dst, Hint::Write);
             let (per_call, out_per_call) = (prefetch.lines().div_ceil(panels), prefetch_out.lines().div_ceil(panels));
             for p in 0..panels {
-                let (j0, panel) = (p * NR, panel_of(k, p));
-                let cols = NR.min(c_dst - j0);
+                let (j0, panel) = (p * nr, panel_of(k, p));
+                let cols = nr.min(c_dst - j0);
                 prefetch.issue(per_call);
                 prefetch_out.issue(out_per_call);
                 ahead.issue();
@@ -416,20 +481,15 @@ pub fn pair_conv(
                     *o = unsafe { out_ptr.0.add(dst[r0 + r] as usize * c_dst + j0) };
                 }
                 let rows = &srcs[r0..r0 + r_count];
-                macro_rules! rows {
-                    ($($r:literal)*) => {
-                        // SAFETY: each source row holds c_src floats, the panel c_src rows of 32;
-                        // the destination rows are the caller's block's, each once per offset.
-                        match (r_count, contiguous) {
-                            // One base and a stride: 11 registers freed in the loop, a few % at
-                            // 32 and 64 channels.
-                            $(($r, true) => unsafe { tile_times_panel::<$r>(rows[0], c_src, c_src, panel, &outs[..$r], cols, accumulate) },)*
-                            $(($r, false) => unsafe { rows_times_panel::<$r>(rows, c_src, panel, &outs[..$r], cols, accumulate) },)*
-                            _ => unreachable!(),
-                        }
-                    };
+                // SAFETY: each source row holds c_src floats, the panel c_src rows of two
+                // vectors; the destination rows are the caller's block's, each once per offset.
+                if contiguous {
+                    // One base and a stride: MR − 1 registers freed in the loop, a few % at 32
+                    // and 64 channels.
+                    by_rows!(r_count, |R| unsafe { V::tile_times_panel::<R>(rows[0], c_src, c_src, panel, &outs[..R], cols, accumulate) });
+                } else {
+                    by_rows!(r_count, |R| unsafe { V::rows_times_panel::<R>(rows, c_src, panel, &outs[..R], cols, accumulate) });
                 }
-                rows!(1 2 3 4 5 6 7 8 9 10 11 12);
             }
         }
     };
@@ -467,7 +527,7 @@ pub fn pair_conv(
                 // block are asked for while this one runs.
                 let mut ahead = match identity {
                     Some(_) => {
-                        let calls = panels * ((r1 - r0).div_ceil(MR) + ranges.iter().map(|&(_, a, b)| (b - a).div_ceil(MR)).sum::<usize>());
+                        let calls = panels * ((r1 - r0).div_ceil(mr) + ranges.iter().map(|&(_, a, b)| (b - a).div_ceil(mr)).sum::<usize>());
                         BlockAhead::new(&ahead_src, (n1 - n0) * c_src, &ahead_dst, (n1 - n0) * c_dst, calls)
                     }
                     None => BlockAhead::none(),
@@ -559,8 +619,9 @@ pub fn pair_conv(
 }
 
 /// [`weight_grad`](super::weight_grad) for f32 on AVX-512; same arguments and result.
-pub fn weight_grad(x: &[f32], c_in: usize, grad_out: &[f32], c_out: usize, pairs: &OffsetPairs) -> Vec<f32> {
-    assert!(avx512_enabled(), "AVX-512F kernels called on a CPU without AVX-512F");
+pub(crate) fn weight_grad<V: TileKernels>(x: &[f32], c_in: usize, grad_out: &[f32], c_out: usize, pairs: &OffsetPairs) -> Vec<f32> {
+    assert!(V::available(), "{} called on a CPU without them", V::NAME);
+    let (nr, mr) = (nr::<V>(), V::MR);
     let volume = pairs.start.len() - 1;
     let block = c_in * c_out;
     if block == 0 {
@@ -602,25 +663,17 @@ pub fn weight_grad(x: &[f32], c_in: usize, grad_out: &[f32], c_out: usize, pairs
             // coming: ask for them while this block's tiles run, a share per tile.
             let next = ((block_index + 1) * PAIR_BLOCK).min(xs.len())..((block_index + 2) * PAIR_BLOCK).min(xs.len());
             let (mut next_x, mut next_g) = (RowPrefetch::new(&xs[next.clone()], c_in), RowPrefetch::new(&gs[next], c_out));
-            let tiles = c_in.div_ceil(MR) * c_out.div_ceil(NR);
+            let tiles = c_in.div_ceil(mr) * c_out.div_ceil(nr);
             let (x_per_tile, g_per_tile) = (next_x.lines().div_ceil(tiles), next_g.lines().div_ceil(tiles));
             let (xs, gs) = (xs_block, gs_block);
-            for i0 in (0..c_in).step_by(MR) {
-                for j0 in (0..c_out).step_by(NR) {
-                    let cols = NR.min(c_out - j0);
+            for i0 in (0..c_in).step_by(mr) {
+                for j0 in (0..c_out).step_by(nr) {
+                    let cols = nr.min(c_out - j0);
                     next_x.issue(x_per_tile);
                     next_g.issue(g_per_tile);
-                    macro_rules! rows {
-                        ($($r:literal)*) => {
-                            match MR.min(c_in - i0) {
-                                // SAFETY: rows and columns stay inside x, grad_out and the block;
-                                // the first pair block writes every element before any is read.
-                                $($r => unsafe { pair_outer_products::<$r>(&xs, &gs, i0, j0, cols, out, c_out, block_index > 0) },)*
-                                _ => unreachable!(),
-                            }
-                        };
-                    }
-                    rows!(1 2 3 4 5 6 7 8 9 10 11 12);
+                    // SAFETY: rows and columns stay inside x, grad_out and the block; the first
+                    // pair block writes every element before any is read.
+                    by_rows!(mr.min(c_in - i0), |R| unsafe { V::pair_outer_products::<R>(xs, gs, i0, j0, cols, out, c_out, block_index > 0) });
                 }
             }
         }
@@ -651,21 +704,16 @@ pub fn weight_grad(x: &[f32], c_in: usize, grad_out: &[f32], c_out: usize, pairs
 /// bits.
 const NORM_BLOCK_ROWS: usize = 16;
 
-/// Adds the two block sums (16 lanes of f32) into the f64 totals at `t1`, `t2` (`lanes` real).
+/// Adds the two block sums' first `lanes` lanes, widened to f64, into the totals at `t1`, `t2`.
 ///
 /// # Safety
-/// AVX-512F; `t1`, `t2` writable for `lanes ≤ 16` f64.
+/// `V`'s instructions; `t1`, `t2` writable for `lanes ≤ V::LANES` f64.
 #[inline(always)]
-unsafe fn add_to_totals(s1: __m512, s2: __m512, t1: *mut f64, t2: *mut f64, lanes: usize) {
+unsafe fn add_to_totals<V: Simd>(s1: V::V, s2: V::V, t1: *mut f64, t2: *mut f64, lanes: usize) {
     unsafe {
         for (s, t) in [(s1, t1), (s2, t2)] {
-            // Lanes 0–7 and 8–15 widened to f64.
-            let halves = [_mm512_cvtps_pd(_mm512_castps512_ps256(s)), _mm512_cvtps_pd(_mm512_castps512_ps256(_mm512_shuffle_f32x4::<0b01_00_11_10>(s, s)))];
-            for (h, half) in halves.into_iter().enumerate() {
-                let n = lanes.saturating_sub(8 * h).min(8);
-                let m = ((1u32 << n) - 1) as __mmask8;
-                let p = t.add(8 * h);
-                _mm512_mask_storeu_pd(p, m, _mm512_add_pd(_mm512_maskz_loadu_pd(m, p), half));
+            for (l, v) in V::to_array(s).into_iter().take(lanes).enumerate() {
+                *t.add(l) += v as f64;
             }
         }
     }
@@ -674,32 +722,36 @@ unsafe fn add_to_totals(s1: __m512, s2: __m512, t1: *mut f64, t2: *mut f64, lane
 /// [`crate::cpu_norm`]'s channel statistics sums over `x`'s rows (`c` channels): `[Σ d; Σ d²]`
 /// with `d = x − shift`, in blocks of 16 rows summed in f32 then added in f64, as the general
 /// loops do, so the same bits.
-pub fn stats_sums(x: &[f32], c: usize, shift: &[f32]) -> Vec<f64> {
-    assert!(avx512_enabled(), "AVX-512F kernels called on a CPU without AVX-512F");
+pub(crate) fn stats_sums<V: TileKernels>(x: &[f32], c: usize, shift: &[f32]) -> Vec<f64> {
+    assert!(V::available(), "{} called on a CPU without them", V::NAME);
     assert!(shift.len() == c && x.len().is_multiple_of(c), "rows of {c} channels");
     let mut total = vec![0.0f64; 2 * c];
-    // SAFETY: AVX-512F; the loops stay inside x, shift and total.
-    unsafe { stats_sums_avx512(x, c, shift, &mut total) };
+    // SAFETY: the CPU has V's instructions; the loops stay inside x, shift and total.
+    unsafe { V::stats_block(x, c, shift, &mut total) };
     total
 }
 
-#[target_feature(enable = "avx512f")]
-unsafe fn stats_sums_avx512(x: &[f32], c: usize, shift: &[f32], total: &mut [f64]) {
+/// The body of [`stats_sums`].
+///
+/// # Safety
+/// `V`'s instructions; `shift` of `c` floats, `x` whole rows of `c`, `total` of `2·c`.
+#[inline(always)]
+unsafe fn stats_block<V: Simd>(x: &[f32], c: usize, shift: &[f32], total: &mut [f64]) {
     unsafe {
         let n = x.len() / c;
         let (x, shift, total) = (x.as_ptr(), shift.as_ptr(), total.as_mut_ptr());
         for b0 in (0..n).step_by(NORM_BLOCK_ROWS) {
             let b1 = (b0 + NORM_BLOCK_ROWS).min(n);
-            for j0 in (0..c).step_by(16) {
-                let m = mask(c - j0, 0);
-                let k = _mm512_maskz_loadu_ps(m, shift.add(j0));
-                let (mut s1, mut s2) = (_mm512_setzero_ps(), _mm512_setzero_ps());
+            for j0 in (0..c).step_by(V::LANES) {
+                let m = V::mask(c - j0);
+                let k = V::load_masked(m, shift.add(j0));
+                let (mut s1, mut s2) = (V::zero(), V::zero());
                 for r in b0..b1 {
-                    let d = _mm512_sub_ps(_mm512_maskz_loadu_ps(m, x.add(r * c + j0)), k);
-                    s1 = _mm512_add_ps(s1, d);
-                    s2 = _mm512_add_ps(s2, _mm512_mul_ps(d, d));
+                    let d = V::sub(V::load_masked(m, x.add(r * c + j0)), k);
+                    s1 = V::add(s1, d);
+                    s2 = V::add(s2, V::mul(d, d));
                 }
-                add_to_totals(s1, s2, total.add(j0), total.add(c + j0), (c - j0).min(16));
+                add_to_totals::<V>(s1, s2, total.add(j0), total.add(c + j0), (c - j0).min(V::LANES));
             }
         }
     }
@@ -709,40 +761,45 @@ unsafe fn stats_sums_avx512(x: &[f32], c: usize, shift: &[f32], total: &mut [f64
 /// `[Σ dz·(x − mean); Σ dz]`, `dz = g` masked where `x·a + b ≤ 0` (with `relu`); blocks as
 /// [`stats_sums`], the same bits as the general loops.
 #[allow(clippy::too_many_arguments)]
-pub fn param_sums(x: &[f32], g: &[f32], c: usize, a: &[f32], b: &[f32], mean: &[f32], relu: bool) -> Vec<f64> {
-    assert!(avx512_enabled(), "AVX-512F kernels called on a CPU without AVX-512F");
+pub(crate) fn param_sums<V: TileKernels>(x: &[f32], g: &[f32], c: usize, a: &[f32], b: &[f32], mean: &[f32], relu: bool) -> Vec<f64> {
+    assert!(V::available(), "{} called on a CPU without them", V::NAME);
     assert!(a.len() == c && b.len() == c && mean.len() == c && x.len().is_multiple_of(c) && g.len() == x.len(), "rows of {c} channels");
     let mut total = vec![0.0f64; 2 * c];
-    // SAFETY: AVX-512F; the loops stay inside the slices.
-    unsafe { param_sums_avx512(x, g, c, a, b, mean, relu, &mut total) };
+    // SAFETY: the CPU has V's instructions; the loops stay inside the slices.
+    unsafe { V::param_block(x, g, c, a, b, mean, relu, &mut total) };
     total
 }
 
-#[target_feature(enable = "avx512f")]
+/// The body of [`param_sums`].
+///
+/// # Safety
+/// `V`'s instructions; `a`, `b`, `mean` of `c` floats, `x` and `g` whole rows of `c`, `total`
+/// of `2·c`.
 #[allow(clippy::too_many_arguments)]
-unsafe fn param_sums_avx512(x: &[f32], g: &[f32], c: usize, a: &[f32], b: &[f32], mean: &[f32], relu: bool, total: &mut [f64]) {
+#[inline(always)]
+unsafe fn param_block<V: Simd>(x: &[f32], g: &[f32], c: usize, a: &[f32], b: &[f32], mean: &[f32], relu: bool, total: &mut [f64]) {
     unsafe {
         let n = x.len() / c;
         let (x, g, total) = (x.as_ptr(), g.as_ptr(), total.as_mut_ptr());
         for b0 in (0..n).step_by(NORM_BLOCK_ROWS) {
             let b1 = (b0 + NORM_BLOCK_ROWS).min(n);
-            for j0 in (0..c).step_by(16) {
-                let m = mask(c - j0, 0);
-                let (va, vb, vmean) = (_mm512_maskz_loadu_ps(m, a.as_ptr().add(j0)), _mm512_maskz_loadu_ps(m, b.as_ptr().add(j0)), _mm512_maskz_loadu_ps(m, mean.as_ptr().add(j0)));
-                let (mut dgamma, mut dbeta) = (_mm512_setzero_ps(), _mm512_setzero_ps());
+            for j0 in (0..c).step_by(V::LANES) {
+                let m = V::mask(c - j0);
+                let (va, vb, vmean) = (V::load_masked(m, a.as_ptr().add(j0)), V::load_masked(m, b.as_ptr().add(j0)), V::load_masked(m, mean.as_ptr().add(j0)));
+                let (mut dgamma, mut dbeta) = (V::zero(), V::zero());
                 for r in b0..b1 {
-                    let v = _mm512_maskz_loadu_ps(m, x.add(r * c + j0));
-                    let mut dz = _mm512_maskz_loadu_ps(m, g.add(r * c + j0));
+                    let v = V::load_masked(m, x.add(r * c + j0));
+                    let mut dz = V::load_masked(m, g.add(r * c + j0));
                     if relu {
                         // z = x·a + b rounded twice (no FMA), as the forward computes it; a NaN z
-                        // compares false and keeps its gradient.
-                        let z = _mm512_add_ps(_mm512_mul_ps(v, va), vb);
-                        dz = _mm512_maskz_mov_ps(!_mm512_cmp_ps_mask::<_CMP_LE_OQ>(z, _mm512_setzero_ps()), dz);
+                        // keeps its gradient.
+                        let z = V::add(V::mul(v, va), vb);
+                        dz = V::zero_where_not_positive(z, dz);
                     }
-                    dbeta = _mm512_add_ps(dbeta, dz);
-                    dgamma = _mm512_add_ps(dgamma, _mm512_mul_ps(dz, _mm512_sub_ps(v, vmean)));
+                    dbeta = V::add(dbeta, dz);
+                    dgamma = V::add(dgamma, V::mul(dz, V::sub(v, vmean)));
                 }
-                add_to_totals(dgamma, dbeta, total.add(j0), total.add(c + j0), (c - j0).min(16));
+                add_to_totals::<V>(dgamma, dbeta, total.add(j0), total.add(c + j0), (c - j0).min(V::LANES));
             }
         }
     }
@@ -753,15 +810,13 @@ mod tests {
     use super::*;
     use super::super::element::GRAD_CHUNK;
     use super::super::norm::ConvEpilogue;
+    use super::super::simd::supported;
 
-    /// Against a naive f64 sum, on offsets of several chunks (the partials path), none (zeros)
-    /// and a few pairs, with channel counts that leave partial row and column tiles; and the same
-    /// bits at one and two threads.
+    /// On every instruction set this CPU has: against a naive f64 sum, on offsets of several
+    /// chunks (the partials path), none (zeros) and a few pairs, with channel counts that leave
+    /// partial row and column tiles; the same bits at one and two threads and on every set.
     #[test]
     fn weight_grad_matches_a_naive_sum() {
-        if !avx512_enabled() {
-            return;
-        }
         let (c_in, c_out, n) = (13, 37, 700);
         let counts = [2 * GRAD_CHUNK + 300, 0, 100, GRAD_CHUNK];
         let mut pairs = OffsetPairs { start: vec![0], input: Vec::new(), output: Vec::new() };
@@ -774,10 +829,14 @@ mod tests {
         }
         let x: Vec<f32> = (0..n * c_in).map(|i| ((i * 37 % 101) as f32 - 50.0) / 50.0).collect();
         let g: Vec<f32> = (0..n * c_out).map(|i| ((i * 53 % 97) as f32 - 48.0) / 48.0).collect();
-        let run = || weight_grad(&x, c_in, &g, c_out, &pairs);
+        let mut first: Option<Vec<f32>> = None;
+        for level in supported() {
+        let run = || at_level!(level, |V| weight_grad::<V>(&x, c_in, &g, c_out, &pairs));
         let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap().install(run);
         let two = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap().install(run);
-        assert!(one == two, "the weight gradient depends on the thread count");
+        assert!(one == two, "{level:?}: the weight gradient depends on the thread count");
+        let first = first.get_or_insert_with(|| one.clone());
+        assert!(*first == one, "{level:?}: the weight gradient differs from the widest set's");
         for k in 0..counts.len() {
             for i in 0..c_in {
                 for j in 0..c_out {
@@ -785,9 +844,10 @@ mod tests {
                         .map(|p| x[pairs.input[p] as usize * c_in + i] as f64 * g[pairs.output[p] as usize * c_out + j] as f64)
                         .sum();
                     let got = one[(k * c_in + i) * c_out + j] as f64;
-                    assert!((got - want).abs() <= 1e-4 * (1.0 + want.abs()), "offset {k} ({i}, {j}): {got} vs {want}");
+                    assert!((got - want).abs() <= 1e-4 * (1.0 + want.abs()), "{level:?} offset {k} ({i}, {j}): {got} vs {want}");
                 }
             }
+        }
         }
     }
 
@@ -798,9 +858,6 @@ mod tests {
     #[test]
     fn destination_blocks_match_the_per_offset_path() {
         use crate::{Coord, CoordIndex, KernelMap};
-        if !avx512_enabled() {
-            return;
-        }
         let coords: Vec<Coord> = {
             let mut c: Vec<Coord> = (0..3000).map(|i: i32| [i % 2, (i * 7) % 23 - 11, (i * 5) % 19 - 9, (i * 3) % 17 - 8]).collect();
             c.sort();
@@ -828,12 +885,15 @@ mod tests {
             ] {
                 let src: Vec<f32> = (0..n_src * c_src).map(|i| ((i * 37 % 101) as f32 - 50.0) / 50.0).collect();
                 let w: Vec<f32> = (0..map.volume() * c_a * c_b).map(|i| ((i * 53 % 97) as f32 - 48.0) / 480.0).collect();
+                let mut first: Option<Vec<f32>> = None;
+                for level in supported() {
                 let run = |p: &OffsetPairs, threads: usize| {
-                    rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap().install(|| pair_conv(&src, c_src, &w, c_dst, n_dst, direction, p, map.identity_offset(), None))
+                    rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap().install(|| at_level!(level, |V| pair_conv::<V>(&src, c_src, &w, c_dst, n_dst, direction, p, map.identity_offset(), None)))
                 };
                 let blocked = run(pairs, 2);
                 assert!(blocked.iter().any(|v| *v != 0.0));
-                let what = format!("{:?} {direction:?}", map.kind());
+                let what = format!("{level:?} {:?} {direction:?}", map.kind());
+                assert!(blocked == *first.get_or_insert_with(|| blocked.clone()), "{what}: differs from the widest set's");
                 assert!(blocked == run(&reversed(pairs), 2), "{what}: the two paths differ");
                 assert!(blocked == run(pairs, 1), "{what}: the blocks depend on the thread count");
                 // With a batch norm (+ ReLU, + a residual) on the finished rows: each path applies
@@ -843,11 +903,12 @@ mod tests {
                 let residual: Vec<f32> = (0..n_dst * c_dst).map(|i| ((i * 29 % 89) as f32 - 44.0) / 88.0).collect();
                 for (relu, residual) in [(true, None), (false, Some(&residual[..]))] {
                     let epilogue = ConvEpilogue::new(&stats, &gamma, &beta, 1e-5, relu, residual);
-                    let run = |p: &OffsetPairs| pair_conv(&src, c_src, &w, c_dst, n_dst, direction, p, map.identity_offset(), Some(&epilogue));
+                    let run = |p: &OffsetPairs| at_level!(level, |V| pair_conv::<V>(&src, c_src, &w, c_dst, n_dst, direction, p, map.identity_offset(), Some(&epilogue)));
                     let mut expected = blocked.clone();
                     epilogue.apply_all(&mut expected);
                     assert!(run(pairs) == expected, "{what}: the blocks' epilogue differs from a pass after");
                     assert!(run(&reversed(pairs)) == expected, "{what}: the per-offset path's epilogue differs");
+                }
                 }
             }
         }
