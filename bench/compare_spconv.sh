@@ -27,8 +27,8 @@
 # Steps (each writes <name>.json, <name>.log = stderr, <name>.rc = exit status into the results folder,
 # or into its round<r>/ folder with --rounds):
 #   spconv                 bench/peer_spconv.py (parts gemm,convs,crosscheck[,minkunet])
-#   pmunet_conv_<b>        cargo run -p sparse-conv --bin sparse-conv-bench -- --coords S --backend b ... --json
-#   pmunet_model_<b>_b1    cargo run -p model --bin model-bench -- --model person_minkunet ... --batch 1 --only infer
+#   pmunet_conv_<b>        cargo run -p bench --bin sparse-conv-bench -- --coords S --backend b ... --json
+#   pmunet_model_<b>_b1    cargo run -p bench --bin model-bench -- --model person_minkunet ... --batch 1 --only infer
 #                          --json (its forward_ms = inference of one frame)
 #   pmunet_model_<b>_b2    the same with --batch 2 --only train (train_step_ms, peak_train_mib)
 # then bench/compare_table.py prints the table and writes table.md.
@@ -159,7 +159,7 @@ peer() {
 
 pmunet() {
     for b in "${BACKEND_LIST[@]}"; do
-        step "pmunet_conv_$b" cargo run -p sparse-conv --bin sparse-conv-bench -- \
+        step "pmunet_conv_$b" cargo run -p bench --bin sparse-conv-bench -- \
             --coords "$SCENE" --backend "$b" --threads "$THREADS" --runs "$RUNS" --warmup "$WARMUP" --json "${PMUNET_ISA[@]}"
     done
     if [[ $QUICK != 1 ]]; then
@@ -168,7 +168,7 @@ pmunet() {
             # in a process of its own so the peak is that figure's alone.
             for spec in "1 infer" "2 train"; do
                 read -r batch only <<< "$spec"
-                step "pmunet_model_${b}_b$batch" cargo run -p model --bin model-bench -- \
+                step "pmunet_model_${b}_b$batch" cargo run -p bench --bin model-bench -- \
                     --model person_minkunet --coords "$SCENE" --backend "$b" --batch "$batch" --only "$only" \
                     --threads "$THREADS" --runs "$MODEL_RUNS" --warmup "$MODEL_WARMUP" --json "${PMUNET_ISA[@]}"
             done

@@ -5,9 +5,9 @@
 
 Reads (whichever are there) from RESULTS_DIR:
   spconv.json                        bench/peer_spconv.py --json
-  pmunet_conv_<backend>.json         cargo run -p sparse-conv --bin sparse-conv-bench -- ... --json
-  pmunet_model_<backend>_b1.json     cargo run -p model --bin model-bench -- ... --batch 1 --json
-  pmunet_model_<backend>_b2.json     cargo run -p model --bin model-bench -- ... --batch 2 --json
+  pmunet_conv_<backend>.json         cargo run -p bench --bin sparse-conv-bench -- ... --json
+  pmunet_model_<backend>_b1.json     cargo run -p bench --bin model-bench -- ... --batch 1 --json
+  pmunet_model_<backend>_b2.json     cargo run -p bench --bin model-bench -- ... --batch 2 --json
   <name>.rc                          exit status of each step (absent: the step was not run)
   <name>.log                         its stderr
   meta.txt                           key=value lines written by compare_spconv.sh

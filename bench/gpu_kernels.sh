@@ -15,7 +15,7 @@ coords=$(realpath "${3:-$root/bench/scene_jrdb_like.npy}")
 shift $(( $# < 3 ? $# : 3 ))
 bench=${SPARSE_CONV_BENCH:-}   # a prebuilt benchmark binary, else it is built here
 if [ -z "$bench" ]; then
-    (cd "$root" && cargo build -q -p sparse-conv --bin sparse-conv-bench)
+    (cd "$root" && cargo build -q -p bench --bin sparse-conv-bench)
     bench=$root/target/debug/sparse-conv-bench
 fi
 dir=$(mktemp -d)

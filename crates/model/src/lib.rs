@@ -10,7 +10,6 @@
 //! - [`centerpoint`]: the dense baseline, laid out the same way (encoder, grid, backbone, head,
 //!   targets, loss, decoding, config).
 //! - [`post`]: score threshold, NMS, box voting and caps, shared by both.
-//! - [`bench`]: what the `model-bench` binary measures.
 //!
 //! A trained model on point clouds of your own: `train::RunDetector` loads a run folder (config
 //! and checkpoint) once and detects in `[x, y, z]` arrays (`crates/train/examples/detect_points.rs`);
@@ -19,7 +18,6 @@
 #![warn(missing_docs)]
 
 /// Timing and memory of a forward pass and a training step.
-pub mod bench;
 /// The dense CenterPoint-style baseline.
 pub mod centerpoint;
 /// The model a run trains.

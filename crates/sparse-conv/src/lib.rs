@@ -18,20 +18,16 @@
 //! - [`tensor`]: [`SparseTensor`], features with coordinates and a shared map cache.
 //! - [`modules`]: convolutions, batch norm, linear and U-Net blocks.
 //! - [`profile`]: the kernels' own time and operation counters.
-//! - [`bench`]: what the benchmark binaries use: voxel scenes, timing helpers.
-//! - [`heap`]: the binaries' malloc policy (freed tensor memory stays in the process).
 //! - [`wgpu_device`]: the wgpu device on the platform's native graphics API (never OpenGL).
 
 #![warn(missing_docs)]
 
 pub mod adam;
 pub mod backend;
-pub mod bench;
 pub mod batch_norm;
 pub mod concat;
 pub mod conv_norm;
 pub mod geometry;
-pub mod heap;
 mod host;
 pub mod kernels;
 pub mod modules;

@@ -254,7 +254,7 @@ fn run_train(a: TrainArgs) -> Result<()> {
 }
 
 fn main() -> ExitCode {
-    sparse_conv::heap::retain_freed_memory();
+    bench::heap::retain_freed_memory();
     let cli = Cli::parse();
     let r = match cli.cmd {
         None => run_train(cli.train),

@@ -13,10 +13,9 @@ use sparse_conv::FusedAdamConfig;
 use sparse_conv::burn::optim::GradientsParams;
 use sparse_conv::burn::tensor::Device;
 use sparse_conv::Coord;
-use sparse_conv::bench::scene;
+use crate::scene;
 
-use crate::config::ModelConfig;
-use crate::detector::Detector;
+use model::{Detector, ModelConfig};
 
 /// A batch of the voxels `coords` (batch column = sample): features and centres are the voxel
 /// centres, `(c + ½)·voxel_size` (the scene files hold floor-voxelized coordinates); no boxes.
@@ -90,7 +89,7 @@ pub struct BenchReport {
     pub runs: usize,
 }
 
-pub use sparse_conv::bench::timing::{median_ms, peak_rss_mb};
+pub use crate::timing::{median_ms, peak_rss_mb};
 pub use sparse_conv::profile::KernelTimes;
 
 /// Where a training step's time goes, mean per step.

@@ -1,6 +1,6 @@
 //! Times kernel-map builds and the sparse convolution's forward and backward on a voxel scene.
 //!
-//! `cargo run -p sparse-conv --bin sparse-conv-bench -- --coords ../shared/bench/scene_jrdb_like.npy`
+//! `cargo run -p bench --bin sparse-conv-bench -- --coords ../shared/bench/scene_jrdb_like.npy`
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -9,10 +9,10 @@ use anyhow::Context;
 use clap::{Parser, ValueEnum};
 use serde::Serialize;
 use sparse_conv::burn::tensor::{Device, Distribution, Tensor};
-use sparse_conv::bench::timing::{Timing, median_ms, peak_rss_mb, time_ms};
+use bench::timing::{Timing, median_ms, peak_rss_mb, time_ms};
 use sparse_conv::profile;
 use sparse_conv::kernels::cpu::{self, PairDirection};
-use sparse_conv::bench::scene;
+use bench::scene;
 use sparse_conv::{CoordIndex, KernelMap, backward_from, sparse_conv};
 
 #[derive(Clone, Copy, Debug, ValueEnum, Serialize)]
@@ -160,7 +160,7 @@ struct Report {
 }
 
 fn main() -> anyhow::Result<()> {
-    sparse_conv::heap::retain_freed_memory();
+    bench::heap::retain_freed_memory();
     // The GEMM ceiling is measured like the kernels run: one single-threaded GEMM per rayon
     // thread. matrixmultiply reads this once, at its first call, which comes later.
     // SAFETY: no other thread exists yet.

@@ -1,16 +1,16 @@
 //! Times an inference forward pass and one training step (forward, loss, backward, Adam) of either
 //! detector on a voxel scene, and reports the peak memory.
 //!
-//! `cargo run -p model --bin model-bench -- --model person_minkunet --coords bench/scene_jrdb_like.npy --threads 2`
+//! `cargo run -p bench --bin model-bench -- --model person_minkunet --coords bench/scene_jrdb_like.npy --threads 2`
 
 use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::{Parser, ValueEnum};
-use model::bench::{KernelTimes, Parts, bench_batch, run};
+use bench::model::{KernelTimes, Parts, bench_batch, run};
 use model::{CenterPointConfig, ModelConfig, PersonMinkUNetConfig};
 use sparse_conv::burn::tensor::Device;
-use sparse_conv::bench::scene;
+use bench::scene;
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 enum Backend {
@@ -71,7 +71,7 @@ struct Args {
 }
 
 fn main() -> anyhow::Result<()> {
-    sparse_conv::heap::retain_freed_memory();
+    bench::heap::retain_freed_memory();
     let args = Args::parse();
     args.kernels.apply();
     anyhow::ensure!(args.batch >= 1 && args.runs >= 1, "--batch and --runs must be at least 1");

@@ -1,5 +1,5 @@
 //! What the workspace's benchmark binaries measure with: medians (and minima) after warm-up, and
-//! peak memory. The time spent inside the op's kernels is counted by [`crate::profile`].
+//! peak memory. The time spent inside the op's kernels is counted by [`sparse_conv::profile`].
 
 use serde::Serialize;
 use std::time::Instant;

@@ -5,7 +5,7 @@ use std::path::Path;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use crate::geometry::coords::Coord;
+use sparse_conv::Coord;
 
 /// Reads int32 or int64 voxel coordinates, `N×4` (batch, x, y, z) or `N×3` (batch 0), from a
 /// NumPy `.npy` file (C order, little-endian).
