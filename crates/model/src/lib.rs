@@ -32,5 +32,5 @@ pub mod post;
 pub use centerpoint::{CenterPoint, CenterPointConfig};
 pub use config::ModelConfig;
 pub use detector::{Detections, Detector, LossTerms};
-pub use person_minkunet::{BoxCoder, MinkUNet, MinkUNetConfig, PersonMinkUNet, PersonMinkUNetConfig, TargetVariant, UNetLevels};
+pub use person_minkunet::{BoxCoder, BoxFrame, MinkUNet, MinkUNetConfig, PersonMinkUNet, PersonMinkUNetConfig, TargetVariant, UNetLevels};
 pub use post::{NmsKind, PostProcessConfig};

@@ -1,5 +1,6 @@
 //! Person-MinkUNet's box encoding (spec §1.8): centre offsets from the voxel centre, log-dimensions
-//! against a mean size, and bin-based rotation with residuals for every bin.
+//! against a mean size, and bin-based rotation with residuals for every bin; the offsets and the
+//! heading in the base frame (the authors') or in each voxel's ray frame ([`BoxFrame`]).
 //!
 //! Head channel layout (`2·bins + 7` channels): `[0]` cls logit, `[1..4]` centre offset (m),
 //! `[4..7]` `log(l/l̄), log(w/w̄), log(h/h̄)`, `[7..7+bins]` bin logits, `[7+bins..7+2·bins]` bin
@@ -8,6 +9,7 @@
 use std::f64::consts::{PI, TAU};
 
 use data_jrdb::Box3d;
+use serde::{Deserialize, Serialize};
 
 /// Channel of the classification logit.
 pub const CLS: usize = 0;
@@ -24,16 +26,35 @@ pub fn wrap_angle(a: f64) -> f64 {
     if r <= -PI { r + TAU } else { r }
 }
 
+/// The frame a voxel's centre offset and heading are expressed in.
+///
+/// A LiDAR sees a person's near side: every voxel's offset to the centre points away from the
+/// sensor by about the body's half-depth, and the shape a voxel's neighbourhood shows for a given
+/// heading depends on the heading relative to the line of sight (the observation angle, KITTI's
+/// α), not on the heading itself. In the base frame both are functions of the voxel's azimuth
+/// that a translation-equivariant network must build from its raw-xyz input; in the ray frame
+/// they are the same wherever the person stands.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum BoxFrame {
+    /// The base frame's x, y, z and the heading θ (the authors').
+    #[default]
+    Base,
+    /// Turned about z by the azimuth φ = atan2(y, x) of the voxel centre as seen from the base
+    /// frame's origin (the sensor): x along the ray, y across it, z up; the heading as α = θ − φ.
+    Ray,
+}
+
 /// A box encoded against one voxel centre: the regression targets of spec §1.9.
 #[derive(Debug, Clone, PartialEq)]
 pub struct EncodedBox {
-    /// Box centre − voxel centre, metres.
+    /// Box centre − voxel centre, metres, in the coder's [`BoxFrame`].
     pub offset: [f64; 3],
     /// `log(dim / mean)` for l, w, h.
     pub log_dims: [f64; 3],
-    /// The heading's bin, `floor((θ mod 2π) / bin)`.
+    /// The heading's bin, `floor((θ mod 2π) / bin)` (θ in the coder's frame).
     pub bin: usize,
-    /// `wrap(θ − (j + ½)·bin)` for every bin j.
+    /// `wrap(θ − (j + ½)·bin)` for every bin j (θ in the coder's frame).
     pub residuals: Vec<f64>,
 }
 
@@ -44,14 +65,28 @@ pub struct BoxCoder {
     pub mean_size: [f64; 3],
     /// Number of rotation bins.
     pub num_bins: usize,
+    /// The frame of the offsets and the heading.
+    pub frame: BoxFrame,
+}
+
+/// The cosine and sine of the azimuth of `v` in the ray frame; `None` in the base frame (and at
+/// the origin, where the azimuth is undefined and the ray frame is the base frame).
+fn turn(frame: BoxFrame, v: [f64; 3]) -> Option<(f64, f64)> {
+    let r = v[0].hypot(v[1]);
+    (frame == BoxFrame::Ray && r > 0.0).then(|| (v[0] / r, v[1] / r))
 }
 
 impl BoxCoder {
-    /// A coder for `num_bins` bins and the given mean size.
+    /// A coder for `num_bins` bins and the given mean size, in the base frame.
     pub fn new(mean_size: [f64; 3], num_bins: usize) -> Self {
         assert!(num_bins > 0, "at least one rotation bin");
         assert!(mean_size.iter().all(|&m| m > 0.0), "mean size must be positive, got {mean_size:?}");
-        Self { mean_size, num_bins }
+        Self { mean_size, num_bins, frame: BoxFrame::Base }
+    }
+
+    /// The same coder in `frame`.
+    pub fn in_frame(self, frame: BoxFrame) -> Self {
+        Self { frame, ..self }
     }
 
     /// Head channels: cls + offset + log-dims + bin logits + residuals = `2·bins + 7`.
@@ -77,11 +112,16 @@ impl BoxCoder {
     /// Encodes `b` against the voxel centre `v`.
     pub fn encode(&self, b: &Box3d, v: [f64; 3]) -> EncodedBox {
         let dims = [b.l, b.w, b.h];
+        let (dx, dy, dz) = (b.cx - v[0], b.cy - v[1], b.cz - v[2]);
+        let (offset, theta) = match turn(self.frame, v) {
+            Some((c, s)) => ([c * dx + s * dy, c * dy - s * dx, dz], wrap_angle(b.rot_z - s.atan2(c))),
+            None => ([dx, dy, dz], b.rot_z),
+        };
         EncodedBox {
-            offset: [b.cx - v[0], b.cy - v[1], b.cz - v[2]],
+            offset,
             log_dims: [0, 1, 2].map(|k| (dims[k] / self.mean_size[k]).ln()),
-            bin: self.bin_of(b.rot_z),
-            residuals: (0..self.num_bins).map(|j| wrap_angle(b.rot_z - self.bin_centre(j))).collect(),
+            bin: self.bin_of(theta),
+            residuals: (0..self.num_bins).map(|j| wrap_angle(theta - self.bin_centre(j))).collect(),
         }
     }
 
@@ -108,7 +148,12 @@ impl BoxCoder {
 
     fn decode_parts(&self, v: [f64; 3], offset: [f64; 3], log_dims: [f64; 3], bin: usize, residual: f64) -> Box3d {
         let [l, w, h] = [0, 1, 2].map(|k| self.mean_size[k] * log_dims[k].exp());
-        Box3d { cx: v[0] + offset[0], cy: v[1] + offset[1], cz: v[2] + offset[2], l, w, h, rot_z: self.decode_heading(bin, residual) }
+        let theta = self.decode_heading(bin, residual);
+        let ([dx, dy, dz], rot_z) = match turn(self.frame, v) {
+            Some((c, s)) => ([c * offset[0] - s * offset[1], s * offset[0] + c * offset[1], offset[2]], wrap_angle(theta + s.atan2(c))),
+            None => (offset, theta),
+        };
+        Box3d { cx: v[0] + dx, cy: v[1] + dy, cz: v[2] + dz, l, w, h, rot_z }
     }
 }
 
@@ -119,7 +164,41 @@ mod tests {
 
     #[test]
     fn encode_decode_round_trip_is_exact() {
-        let coder = BoxCoder::new([0.9, 0.5, 1.7], 12);
+        for frame in [BoxFrame::Base, BoxFrame::Ray] {
+            round_trip(BoxCoder::new([0.9, 0.5, 1.7], 12).in_frame(frame));
+        }
+    }
+
+    /// Hand-derived: a voxel at (0, 5) looks along +y (φ = 90°); a centre 0.2 m farther out and
+    /// 0.1 m to the sensor's right (+x, seen from the origin looking along +y) is offset (0.2, −0.1)
+    /// in the ray frame; a person facing the sensor (θ = −90°) has α = −180°, facing away α = 0.
+    #[test]
+    fn ray_frame_by_hand() {
+        let coder = BoxCoder::new([0.9, 0.5, 1.7], 12).in_frame(BoxFrame::Ray);
+        let v = [0.0, 5.0, 0.3];
+        let b = Box3d { cx: 0.1, cy: 5.2, cz: 0.9, l: 0.4, w: 0.6, h: 1.7, rot_z: -PI / 2.0 };
+        let e = coder.encode(&b, v);
+        for (got, want) in e.offset.iter().zip([0.2, -0.1, 0.6]) {
+            assert!((got - want).abs() < 1e-12, "{:?}", e.offset);
+        }
+        assert_eq!(e.bin, coder.bin_of(PI), "α = ±180° is bin {}", coder.bin_of(PI));
+        let away = coder.encode(&Box3d { rot_z: PI / 2.0, ..b }, v);
+        assert_eq!(away.bin, 0);
+        assert!((away.residuals[0] + coder.bin_width() / 2.0).abs() < 1e-12);
+        // The same person seen at another azimuth (the scene turned by 30° about the sensor) has
+        // the same encoding.
+        let (c, s) = ((PI / 6.0).cos(), (PI / 6.0).sin());
+        let turned = |x: f64, y: f64| (c * x - s * y, s * x + c * y);
+        let (vx, vy) = turned(v[0], v[1]);
+        let (bx, by) = turned(b.cx, b.cy);
+        let e30 = coder.encode(&Box3d { cx: bx, cy: by, rot_z: b.rot_z + PI / 6.0, ..b }, [vx, vy, v[2]]);
+        assert_eq!(e30.bin, e.bin);
+        for (x, y) in e30.offset.iter().zip(&e.offset).chain(e30.residuals.iter().zip(&e.residuals)) {
+            assert!((x - y).abs() < 1e-12, "{e30:?} vs {e:?}");
+        }
+    }
+
+    fn round_trip(coder: BoxCoder) {
         assert_eq!(coder.channels(), 31);
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
         let mut headings: Vec<f64> = (0..500).map(|_| rng.random_range(-10.0..10.0)).collect();
@@ -137,7 +216,8 @@ mod tests {
                 assert!((a - b).abs() < 1e-12, "{d:?} vs {b:?}");
             }
             assert!(d.rot_z > -PI && d.rot_z <= PI);
-            assert!((d.rot_z - wrap_angle(theta)).abs() < 1e-9, "θ {theta}: {} vs {}", d.rot_z, wrap_angle(theta));
+            // (±π are one heading: compare the difference wrapped.)
+            assert!(wrap_angle(d.rot_z - theta).abs() < 1e-9, "θ {theta}: {} vs {}", d.rot_z, wrap_angle(theta));
             // Through the head layout: a row whose arg-max bin is the encoded one decodes the same box.
             let mut row = vec![0f32; coder.channels()];
             row[OFFSET..OFFSET + 3].copy_from_slice(&e.offset.map(|x| x as f32));

@@ -5,6 +5,7 @@ use sparse_conv::burn::tensor::Device;
 
 use super::PersonMinkUNet;
 use super::backbone::MinkUNetConfig;
+use super::box_coder::BoxFrame;
 use crate::post::PostProcessConfig;
 
 /// Which soft classification target (spec §1.9).
@@ -57,6 +58,9 @@ pub struct PersonMinkUNetConfig {
     pub num_bins: usize,
     /// Mean person size (l, w, h) the log-dimensions are relative to (0.9, 0.5, 1.7).
     pub mean_size: [f64; 3],
+    /// The frame of the centre offsets and the heading: `"base"` (the authors') or `"ray"`
+    /// (turned by each voxel's azimuth from the sensor; the heading as the observation angle).
+    pub box_frame: BoxFrame,
     /// ε of the soft classification target (0.2 m).
     pub epsilon: f64,
     /// Code or paper form of the soft target.
@@ -84,6 +88,7 @@ impl Default for PersonMinkUNetConfig {
             width: 1.0,
             num_bins: 12,
             mean_size: [0.9, 0.5, 1.7],
+            box_frame: BoxFrame::Base,
             epsilon: 0.2,
             target: TargetVariant::Code,
             cls_weight: 100.0,

@@ -15,7 +15,7 @@ pub mod loss;
 pub mod targets;
 
 pub use backbone::{MinkUNet, MinkUNetConfig, UNetLevels};
-pub use box_coder::BoxCoder;
+pub use box_coder::{BoxCoder, BoxFrame};
 pub use config::{InputFeatures, PersonMinkUNetConfig, TargetVariant};
 
 use data_jrdb::Batch;
@@ -56,7 +56,7 @@ impl PersonMinkUNet {
 
     /// The box coder of the config.
     pub fn coder(&self) -> BoxCoder {
-        BoxCoder::new(self.config.mean_size, self.config.num_bins)
+        BoxCoder::new(self.config.mean_size, self.config.num_bins).in_frame(self.config.box_frame)
     }
 
     /// The loss weights of the config.
