@@ -91,7 +91,7 @@ impl SparseTensor {
             self.stride,
             other.stride
         );
-        self.with_features(crate::concat::concat_channels(self.features.clone(), other.features.clone()))
+        self.with_features(crate::ops::concat::concat_channels(self.features.clone(), other.features.clone()))
     }
 
     /// The submanifold map of an odd `kernel` at this level, built once per cache.

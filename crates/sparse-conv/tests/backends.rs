@@ -6,7 +6,7 @@ mod common;
 use std::sync::Arc;
 
 use common::*;
-use sparse_conv::backend::composed;
+use sparse_conv::ops::conv::composed;
 use sparse_conv::burn::backend::Dispatch;
 use sparse_conv::burn::tensor::{DType, Device, Tensor};
 use sparse_conv::{CoordIndex, KernelMap};

@@ -376,7 +376,7 @@ fn sum_slices_kernel<F: Float, N: Size>(partial: &[Vector<F, N>], out: &mut [Vec
     out[i] = sum;
 }
 
-/// One Adam step per element (`crate::adam`'s arithmetic): `out = [θ'; m₁'; m₂']`, each `len`,
+/// One Adam step per element (`crate::optim::adam`'s arithmetic): `out = [θ'; m₁'; m₂']`, each `len`,
 /// with `amsgrad` also the new running maximum of m₂ (Burn's `max_pair`: `b` where the old
 /// maximum is lower).
 #[cube(launch_unchecked)]
@@ -677,7 +677,7 @@ pub(crate) fn runs(t: &CubeTensor) -> bool {
     t.dtype() == DType::F32
 }
 
-/// One Adam step of a flat f32 parameter on a cube device, `[3, n]` (see `crate::adam`).
+/// One Adam step of a flat f32 parameter on a cube device, `[3, n]` (see `crate::optim::adam`).
 pub(crate) fn adam_step(param: CubeTensor, grad: CubeTensor, moment_1: CubeTensor, moment_2: CubeTensor, max_moment_2: Option<CubeTensor>, s: crate::kernels::cpu::adam::AdamScalars<f32>) -> CubeTensor {
     let amsgrad = max_moment_2.is_some();
     // Without AMSGrad the kernel never reads the maximum; m₂ stands in for the binding.

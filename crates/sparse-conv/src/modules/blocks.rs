@@ -9,7 +9,7 @@ use super::{
     SparseConvTranspose3dConfig, SubmanifoldConv3d, SubmanifoldConv3dConfig,
 };
 use crate::SparseTensor;
-use crate::batch_norm::Epilogue;
+use crate::ops::batch_norm::Epilogue;
 
 /// Configuration of a [`ConvBnRelu`].
 #[derive(Config, Debug)]

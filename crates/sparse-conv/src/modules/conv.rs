@@ -9,9 +9,9 @@ use burn::tensor::{Device, Tensor};
 
 use super::SparseBatchNorm;
 use crate::SparseTensor;
-use crate::batch_norm::Epilogue;
+use crate::ops::batch_norm::Epilogue;
 use crate::geometry::kernel_map::KernelMap;
-use crate::op::sparse_conv;
+use crate::ops::conv::sparse_conv;
 
 /// `U(±bound)` for a `[K, C_in, C_out]` weight.
 fn uniform_weight(volume: usize, c_in: usize, c_out: usize, bound: f64, device: &Device) -> Param<Tensor<3>> {

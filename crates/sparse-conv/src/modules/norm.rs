@@ -8,10 +8,10 @@ use std::sync::Arc;
 use burn::tensor::{Device, Tensor};
 
 use crate::SparseTensor;
-use crate::batch_norm::{Epilogue, batch_norm_eval, batch_norm_train};
-use crate::conv_norm::sparse_conv_norm_eval;
+use crate::ops::batch_norm::{Epilogue, batch_norm_eval, batch_norm_train};
+use crate::ops::conv_norm::sparse_conv_norm_eval;
 use crate::geometry::kernel_map::KernelMap;
-use crate::op::sparse_conv;
+use crate::ops::conv::sparse_conv;
 
 /// Configuration of a [`SparseBatchNorm`]; the defaults are PyTorch's `BatchNorm1d` (spec §1.6).
 #[derive(Config, Debug)]
@@ -29,7 +29,7 @@ pub struct SparseBatchNormConfig {
 /// Batch norm with every voxel of the batch as one sample: batch statistics and running-stat
 /// updates on an autodiff device with the layer's training flag on, running statistics
 /// otherwise (Burn's `BatchNorm` switch, whose parameters and record it keeps). It runs as the
-/// fused op of [`crate::batch_norm`], with the ReLU after it folded in by [`Self::forward_relu`]
+/// fused op of [`crate::ops::batch_norm`], with the ReLU after it folded in by [`Self::forward_relu`]
 /// and a residual block's shortcut sum and ReLU by [`Self::forward_add_relu`]; evaluating after
 /// a conv, it runs inside the conv's op ([`Self::after_conv`]).
 #[derive(Module, Debug)]

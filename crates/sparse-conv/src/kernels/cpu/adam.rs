@@ -1,5 +1,5 @@
 //! One Adam step over slices, the parameter and both moments in one pass (the arithmetic of
-//! `crate::adam`'s module docs, Burn's operation for operation).
+//! `crate::optim::adam`'s module docs, Burn's operation for operation).
 
 use rayon::prelude::*;
 

@@ -22,7 +22,7 @@ use burn::backend::{Autodiff, Backend, Dispatch, Flex, NdArray, Scalar, TensorMe
 use burn::tensor::{Shape, Slice, Tensor};
 use burn_cubecl::CubeBackend;
 
-use crate::host::{Host, on_host};
+use crate::ops::host::{Host, on_host};
 use crate::kernels::cpu::norm as cpu_norm;
 use crate::profile::{Kernel, in_kernel};
 

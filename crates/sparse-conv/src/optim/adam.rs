@@ -26,7 +26,7 @@ use burn::optim::{Adam, AdamState, AdaptiveMomentumState, LearningRate, ModuleOp
 use burn::tensor::{Device, Shape, Slice, Tensor};
 use burn_cubecl::CubeBackend;
 
-use crate::host::{Host, on_host};
+use crate::ops::host::{Host, on_host};
 use crate::kernels::cpu::adam::{AdamScalars, adam_update};
 
 /// A backend that runs one Adam step of a flat parameter.

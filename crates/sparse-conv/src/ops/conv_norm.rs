@@ -15,10 +15,10 @@ use burn::backend::{Autodiff, Dispatch, Flex, NdArray, backend_extension};
 use burn::tensor::{Shape, Tensor};
 use burn_cubecl::CubeBackend;
 
-use crate::backend::{NormAfterConv, SparseConvBackend, cpu_forward};
-use crate::batch_norm::{BatchNormBackend, Epilogue};
+use crate::ops::conv::{NormAfterConv, SparseConvBackend, cpu_forward};
+use crate::ops::batch_norm::{BatchNormBackend, Epilogue};
 use crate::geometry::kernel_map::KernelMap;
-use crate::op::check_conv_inputs;
+use crate::ops::conv::check_conv_inputs;
 
 /// A backend that runs a sparse convolution and the batch norm after it (fixed statistics) as
 /// one op. Shapes as [`SparseConvBackend::sparse_conv`]'s; `stats` is `[2, C_out]` (mean, biased
@@ -104,7 +104,7 @@ impl ConvNormBackend for CubeBackend {}
 impl<B: ConvNormBackend, C: CheckpointStrategy> ConvNormBackend for Autodiff<B, C> {}
 
 /// `epilogue(batch_norm(sparse_conv(features, weight, map)))` with the statistics `mean`, `var`
-/// (inference: the running averages): [`crate::batch_norm_eval`] of [`crate::sparse_conv`], in
+/// (inference: the running averages): [`crate::ops::batch_norm_eval`] of [`crate::sparse_conv`], in
 /// one op where the backend has one.
 #[allow(clippy::too_many_arguments)]
 pub fn sparse_conv_norm_eval(

@@ -16,7 +16,7 @@ use burn::backend::tensor::FloatTensor;
 use burn::backend::{Autodiff, Backend, Dispatch, Flex, NdArray, TensorMetadata, backend_extension};
 use burn::tensor::{Shape, Slice, Tensor};
 use burn_cubecl::CubeBackend;
-use crate::host::{Host, on_host};
+use crate::ops::host::{Host, on_host};
 use crate::kernels::cpu::{Element, filled_in_chunks};
 
 /// A backend that concatenates and splits `[rows, C]` features along the channels.

@@ -13,15 +13,15 @@ use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
 use burn::backend::autodiff::grads::Gradients;
 use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
 use burn::backend::tensor::{FloatTensor, IndexingUpdateOp, IntTensor};
-use burn::backend::{Autodiff, Backend, Flex, NdArray, TensorMetadata, backend_extension};
+use burn::backend::{Autodiff, Backend, Dispatch, Flex, NdArray, TensorMetadata, backend_extension};
 use burn_cubecl::CubeBackend;
-use burn::tensor::{Shape, TensorData};
+use burn::tensor::{Shape, Tensor, TensorData};
 
 use crate::kernels::cpu::{self, PairDirection};
 use crate::kernels::cpu::norm as cpu_norm;
 use crate::kernels::cube;
 use crate::geometry::kernel_map::KernelMap;
-use crate::host::{Host, HostFloats, on_host};
+use crate::ops::host::{Host, HostFloats, on_host};
 use crate::profile::{Kernel, count_conv_flops, in_kernel};
 
 /// A backend that can run the sparse convolution of a [`KernelMap`].
@@ -256,4 +256,28 @@ impl<B: SparseConvBackend, C: CheckpointStrategy> SparseConvBackend for Autodiff
             OpsKind::UnTracked(prep) => prep.finish(B::sparse_conv(features.into_primitive(), weight.into_primitive(), map)),
         }
     }
+}
+
+/// `out[o] = Σ_k Σ_{(i, o) ∈ M_k} features[i] · weight[k]`, differentiable in both arguments.
+///
+/// `features` is `[map.n_in(), C_in]`, `weight` is `[map.volume(), C_in, C_out]`; the result is
+/// `[map.n_out(), C_out]` on the same device.
+pub fn sparse_conv(features: Tensor<2>, weight: Tensor<3>, map: &Arc<KernelMap>) -> Tensor<2> {
+    check_conv_inputs(&features, &weight, map);
+    Tensor::from_dispatch(<Dispatch as SparseConvBackend>::sparse_conv(
+        features.into_dispatch(),
+        weight.into_dispatch(),
+        map.clone(),
+    ))
+}
+
+/// Panics, naming the mismatch, unless `features` and `weight` fit `map` and each other; returns
+/// the output channels.
+pub(crate) fn check_conv_inputs(features: &Tensor<2>, weight: &Tensor<3>, map: &KernelMap) -> usize {
+    let [rows, c_in] = features.dims();
+    let [volume, w_in, c_out] = weight.dims();
+    assert_eq!(rows, map.n_in(), "features have {rows} rows but the kernel map expects {}", map.n_in());
+    assert_eq!(volume, map.volume(), "weight has {volume} offsets but the kernel map has {}", map.volume());
+    assert_eq!(c_in, w_in, "features have {c_in} channels, the weight expects {w_in}");
+    c_out
 }
