@@ -805,7 +805,8 @@ unsafe fn param_block<V: Simd>(x: &[f32], g: &[f32], c: usize, a: &[f32], b: &[f
     }
 }
 
-#[cfg(test)]
+// The instruction sets the tests run are x86-64 ones (until a NEON `Simd` lands).
+#[cfg(all(test, target_arch = "x86_64"))]
 mod tests {
     use super::*;
     use super::super::element::GRAD_CHUNK;

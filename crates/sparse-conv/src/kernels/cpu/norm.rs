@@ -419,6 +419,7 @@ mod tests {
     /// and blocks (1005 rows), a single group, three channels; with and without ReLU, with a NaN
     /// input (whose gradient ReLU keeps).
     #[test]
+    #[cfg(target_arch = "x86_64")]
     fn simd_sums_are_the_general_loops_bits() {
         use super::super::micro::{at_level, param_sums as simd_param_sums, stats_sums as simd_stats_sums};
         for level in super::super::simd::supported() {

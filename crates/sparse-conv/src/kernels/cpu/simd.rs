@@ -81,10 +81,10 @@ impl Level {
 /// The SIMD kernels f32 runs under the current [`KernelOptions`](crate::KernelOptions) on this
 /// CPU, or `None` for the general gather–GEMM–scatter path.
 pub(crate) fn level() -> Option<Level> {
-    use crate::CpuKernels;
     let asked = crate::KernelOptions::current().cpu;
     #[cfg(target_arch = "x86_64")]
     {
+        use crate::CpuKernels;
         let avx2 = std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma");
         match asked {
             CpuKernels::Generic => None,
@@ -100,17 +100,14 @@ pub(crate) fn level() -> Option<Level> {
 }
 
 /// Every level this CPU can run, widest first (the tests run each).
-#[cfg(test)]
+#[cfg(all(test, target_arch = "x86_64"))]
 pub(crate) fn supported() -> Vec<Level> {
     let mut found = Vec::new();
-    #[cfg(target_arch = "x86_64")]
-    {
-        if std::arch::is_x86_feature_detected!("avx512f") {
-            found.push(Level::Avx512);
-        }
-        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
-            found.push(Level::Avx2);
-        }
+    if std::arch::is_x86_feature_detected!("avx512f") {
+        found.push(Level::Avx512);
+    }
+    if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+        found.push(Level::Avx2);
     }
     found
 }
