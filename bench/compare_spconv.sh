@@ -160,7 +160,7 @@ peer() {
 pmunet() {
     for b in "${BACKEND_LIST[@]}"; do
         step "pmunet_conv_$b" cargo run -p bench --bin sparse-conv-bench -- \
-            --coords "$SCENE" --backend "$b" --threads "$THREADS" --runs "$RUNS" --warmup "$WARMUP" --json "${PMUNET_ISA[@]}"
+            --coords "$SCENE" --backend "$b" --threads "$THREADS" --runs "$RUNS" --warmup "$WARMUP" --json ${PMUNET_ISA[@]+"${PMUNET_ISA[@]}"}
     done
     if [[ $QUICK != 1 ]]; then
         for b in "${BACKEND_LIST[@]}"; do
@@ -170,7 +170,7 @@ pmunet() {
                 read -r batch only <<< "$spec"
                 step "pmunet_model_${b}_b$batch" cargo run -p bench --bin model-bench -- \
                     --model person_minkunet --coords "$SCENE" --backend "$b" --batch "$batch" --only "$only" \
-                    --threads "$THREADS" --runs "$MODEL_RUNS" --warmup "$MODEL_WARMUP" --json "${PMUNET_ISA[@]}"
+                    --threads "$THREADS" --runs "$MODEL_RUNS" --warmup "$MODEL_WARMUP" --json ${PMUNET_ISA[@]+"${PMUNET_ISA[@]}"}
             done
         done
     fi

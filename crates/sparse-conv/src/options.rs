@@ -21,6 +21,26 @@ pub enum CpuKernels {
     Generic,
 }
 
+impl CpuKernels {
+    /// The choice as a byte, for the process-wide atomic (exhaustive both ways, so a new
+    /// choice cannot be forgotten in one of them).
+    fn to_byte(self) -> u8 {
+        match self {
+            Self::Auto => 0,
+            Self::Avx2 => 1,
+            Self::Generic => 2,
+        }
+    }
+
+    fn from_byte(b: u8) -> Self {
+        match b {
+            0 => Self::Auto,
+            1 => Self::Avx2,
+            _ => Self::Generic,
+        }
+    }
+}
+
 /// Every knob of the op's kernels; the defaults are what the benchmarks chose. It is a TOML table
 /// (`[kernels]` of a run's config) and a set of command-line flags (`--cpu-kernels`,
 /// `--gpu-tiled-min-cubes`) alike.
@@ -46,9 +66,8 @@ impl Default for KernelOptions {
     }
 }
 
-/// [`CpuKernels`] as its index in declaration order.
+/// [`CpuKernels`] as a byte ([`CpuKernels::to_byte`]).
 static CPU: AtomicU8 = AtomicU8::new(0);
-const CPU_CHOICES: [CpuKernels; 3] = [CpuKernels::Auto, CpuKernels::Avx2, CpuKernels::Generic];
 static TILED_MIN_CUBES: AtomicUsize = AtomicUsize::new(DEFAULT_TILED_MIN_CUBES);
 
 impl KernelOptions {
@@ -56,14 +75,13 @@ impl KernelOptions {
     /// first one: results are bit-identical at every thread count for a given choice, and the
     /// SIMD levels give each other's bits; the general path differs from them in the last bits.
     pub fn apply(self) {
-        let index = CPU_CHOICES.iter().position(|&c| c == self.cpu).expect("every choice is listed");
-        CPU.store(index as u8, Ordering::Relaxed);
+        CPU.store(self.cpu.to_byte(), Ordering::Relaxed);
         TILED_MIN_CUBES.store(self.gpu_tiled_min_cubes, Ordering::Relaxed);
     }
 
     /// The options in effect.
     pub fn current() -> Self {
-        let cpu = CPU_CHOICES[CPU.load(Ordering::Relaxed) as usize];
+        let cpu = CpuKernels::from_byte(CPU.load(Ordering::Relaxed));
         Self { cpu, gpu_tiled_min_cubes: TILED_MIN_CUBES.load(Ordering::Relaxed) }
     }
 }

@@ -271,6 +271,8 @@ pub(crate) unsafe trait TileKernels: Simd {
 /// Implements [`TileKernels`] for an instruction set `$isa` whose target features are `$features`.
 macro_rules! tile_kernels {
     ($isa:ty, $features:literal, $detected:expr) => {
+        // The row-pointer arrays hold MAX_MR rows.
+        const _: () = assert!(<$isa as Simd>::MR <= MAX_MR);
         // SAFETY: every entry point is compiled for `$features`, which `available` tests.
         unsafe impl TileKernels for $isa {
             fn available() -> bool {
@@ -391,7 +393,8 @@ fn pack_panels<V: Simd>(weight: &[f32], volume: usize, c_src: usize, c_dst: usiz
     packed
 }
 
-/// [`pair_conv`](super::pair_conv) for f32 on AVX-512; same arguments and result, up to rounding.
+/// [`pair_conv`](super::pair_conv) for f32 on `V`'s instructions; same arguments and result, up to
+/// rounding.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn pair_conv<V: TileKernels>(
     src: &[f32],
@@ -442,7 +445,7 @@ pub(crate) fn pair_conv<V: TileKernels>(
                     *row = unsafe { out_ptr.0.add(dst(r0 + r) * c_dst + j0) };
                 }
                 // SAFETY: the tile holds m rows of lda ≥ c_src floats, the panel c_src rows of
-                // 32; destination rows are written by this call only (see below).
+                // nr; destination rows are written by this call only (see below).
                 let a = unsafe { tile.add(r0 * lda) };
                 by_rows!(r_count, |R| unsafe { V::tile_times_panel::<R>(a, lda, c_src, panel, &rows[..R], cols, accumulate) });
             }
@@ -618,7 +621,7 @@ pub(crate) fn pair_conv<V: TileKernels>(
     out
 }
 
-/// [`weight_grad`](super::weight_grad) for f32 on AVX-512; same arguments and result.
+/// [`weight_grad`](super::weight_grad) for f32 on `V`'s instructions; same arguments and result.
 pub(crate) fn weight_grad<V: TileKernels>(x: &[f32], c_in: usize, grad_out: &[f32], c_out: usize, pairs: &OffsetPairs) -> Vec<f32> {
     assert!(V::available(), "{} called on a CPU without them", V::NAME);
     let (nr, mr) = (nr::<V>(), V::MR);

@@ -14,9 +14,13 @@
 pub mod adam;
 mod conv;
 mod element;
+// Until a NEON `Simd` lands, other architectures instantiate none of the SIMD kernels.
+#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code, unused_imports, unused_macros))]
 mod micro;
+#[cfg_attr(not(target_arch = "x86_64"), allow(unreachable_code, unused_imports, unused_variables))]
 mod native;
 pub mod norm;
+#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
 pub(crate) mod simd;
 
 pub use conv::{pair_conv, weight_grad};
