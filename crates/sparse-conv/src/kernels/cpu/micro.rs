@@ -251,8 +251,6 @@ unsafe fn rows_times_panel<V: Simd, const R: usize>(rows: &[*const f32], kc: usi
 /// # Safety
 /// Callable only on a CPU with the instruction set.
 pub(crate) unsafe trait TileKernels: Simd {
-    /// Whether this CPU has the instruction set.
-    fn available() -> bool;
     /// [`pair_outer_products`].
     #[allow(clippy::too_many_arguments)]
     unsafe fn pair_outer_products<const R: usize>(xs: &[*const f32], gs: &[*const f32], i0: usize, j0: usize, cols: usize, out: *mut f32, ld: usize, accumulate: bool);
@@ -270,14 +268,11 @@ pub(crate) unsafe trait TileKernels: Simd {
 
 /// Implements [`TileKernels`] for an instruction set `$isa` whose target features are `$features`.
 macro_rules! tile_kernels {
-    ($isa:ty, $features:literal, $detected:expr) => {
+    ($isa:ty, $features:literal) => {
         // The row-pointer arrays hold MAX_MR rows.
         const _: () = assert!(<$isa as Simd>::MR <= MAX_MR);
-        // SAFETY: every entry point is compiled for `$features`, which `available` tests.
+        // SAFETY: every entry point is compiled for `$features`, which `Simd::available` tests.
         unsafe impl TileKernels for $isa {
-            fn available() -> bool {
-                $detected
-            }
             #[target_feature(enable = $features)]
             unsafe fn pair_outer_products<const R: usize>(xs: &[*const f32], gs: &[*const f32], i0: usize, j0: usize, cols: usize, out: *mut f32, ld: usize, accumulate: bool) {
                 unsafe { self::pair_outer_products::<Self, R>(xs, gs, i0, j0, cols, out, ld, accumulate) }
@@ -303,9 +298,9 @@ macro_rules! tile_kernels {
 }
 
 #[cfg(target_arch = "x86_64")]
-tile_kernels!(super::simd::Avx512, "avx512f", std::arch::is_x86_feature_detected!("avx512f"));
+tile_kernels!(super::simd::Avx512, "avx512f");
 #[cfg(target_arch = "x86_64")]
-tile_kernels!(super::simd::Avx2, "avx2,fma", std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma"));
+tile_kernels!(super::simd::Avx2, "avx2,fma");
 
 /// Runs `$call` with `$r` a constant equal to `$rows` (1 ..= [`MAX_MR`]): the row count of a
 /// tile, a const parameter of the micro-kernels.
@@ -835,23 +830,23 @@ mod tests {
         let g: Vec<f32> = (0..n * c_out).map(|i| ((i * 53 % 97) as f32 - 48.0) / 48.0).collect();
         let mut first: Option<Vec<f32>> = None;
         for level in supported() {
-        let run = || at_level!(level, |V| weight_grad::<V>(&x, c_in, &g, c_out, &pairs));
-        let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap().install(run);
-        let two = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap().install(run);
-        assert!(one == two, "{level:?}: the weight gradient depends on the thread count");
-        let first = first.get_or_insert_with(|| one.clone());
-        assert!(*first == one, "{level:?}: the weight gradient differs from the widest set's");
-        for k in 0..counts.len() {
-            for i in 0..c_in {
-                for j in 0..c_out {
-                    let want: f64 = (pairs.start[k]..pairs.start[k + 1])
-                        .map(|p| x[pairs.input[p] as usize * c_in + i] as f64 * g[pairs.output[p] as usize * c_out + j] as f64)
-                        .sum();
-                    let got = one[(k * c_in + i) * c_out + j] as f64;
-                    assert!((got - want).abs() <= 1e-4 * (1.0 + want.abs()), "{level:?} offset {k} ({i}, {j}): {got} vs {want}");
+            let run = || at_level!(level, |V| weight_grad::<V>(&x, c_in, &g, c_out, &pairs));
+            let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap().install(run);
+            let two = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap().install(run);
+            assert!(one == two, "{level:?}: the weight gradient depends on the thread count");
+            let first = first.get_or_insert_with(|| one.clone());
+            assert!(*first == one, "{level:?}: the weight gradient differs from the widest set's");
+            for k in 0..counts.len() {
+                for i in 0..c_in {
+                    for j in 0..c_out {
+                        let want: f64 = (pairs.start[k]..pairs.start[k + 1])
+                            .map(|p| x[pairs.input[p] as usize * c_in + i] as f64 * g[pairs.output[p] as usize * c_out + j] as f64)
+                            .sum();
+                        let got = one[(k * c_in + i) * c_out + j] as f64;
+                        assert!((got - want).abs() <= 1e-4 * (1.0 + want.abs()), "{level:?} offset {k} ({i}, {j}): {got} vs {want}");
+                    }
                 }
             }
-        }
         }
     }
 
@@ -889,30 +884,30 @@ mod tests {
             ] {
                 let src: Vec<f32> = (0..n_src * c_src).map(|i| ((i * 37 % 101) as f32 - 50.0) / 50.0).collect();
                 let w: Vec<f32> = (0..map.volume() * c_a * c_b).map(|i| ((i * 53 % 97) as f32 - 48.0) / 480.0).collect();
-                let mut first: Option<Vec<f32>> = None;
-                for level in supported() {
-                let run = |p: &OffsetPairs, threads: usize| {
-                    rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap().install(|| at_level!(level, |V| pair_conv::<V>(&src, c_src, &w, c_dst, n_dst, direction, p, map.identity_offset(), None)))
-                };
-                let blocked = run(pairs, 2);
-                assert!(blocked.iter().any(|v| *v != 0.0));
-                let what = format!("{level:?} {:?} {direction:?}", map.kind());
-                assert!(blocked == *first.get_or_insert_with(|| blocked.clone()), "{what}: differs from the widest set's");
-                assert!(blocked == run(&reversed(pairs), 2), "{what}: the two paths differ");
-                assert!(blocked == run(pairs, 1), "{what}: the blocks depend on the thread count");
-                // With a batch norm (+ ReLU, + a residual) on the finished rows: each path applies
-                // it where it finishes rows, with the same result as a pass after the conv.
                 let stats: Vec<f32> = (0..2 * c_dst).map(|j| if j < c_dst { 0.1 * (j % 5) as f32 - 0.2 } else { 0.5 + 0.1 * (j % 3) as f32 }).collect();
                 let (gamma, beta): (Vec<f32>, Vec<f32>) = (0..c_dst).map(|j| (1.0 + 0.05 * j as f32, 0.02 * j as f32 - 0.3)).unzip();
                 let residual: Vec<f32> = (0..n_dst * c_dst).map(|i| ((i * 29 % 89) as f32 - 44.0) / 88.0).collect();
-                for (relu, residual) in [(true, None), (false, Some(&residual[..]))] {
-                    let epilogue = ConvEpilogue::new(&stats, &gamma, &beta, 1e-5, relu, residual);
-                    let run = |p: &OffsetPairs| at_level!(level, |V| pair_conv::<V>(&src, c_src, &w, c_dst, n_dst, direction, p, map.identity_offset(), Some(&epilogue)));
-                    let mut expected = blocked.clone();
-                    epilogue.apply_all(&mut expected);
-                    assert!(run(pairs) == expected, "{what}: the blocks' epilogue differs from a pass after");
-                    assert!(run(&reversed(pairs)) == expected, "{what}: the per-offset path's epilogue differs");
-                }
+                let mut first: Option<Vec<f32>> = None;
+                for level in supported() {
+                    let run = |p: &OffsetPairs, threads: usize| {
+                        rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap().install(|| at_level!(level, |V| pair_conv::<V>(&src, c_src, &w, c_dst, n_dst, direction, p, map.identity_offset(), None)))
+                    };
+                    let blocked = run(pairs, 2);
+                    assert!(blocked.iter().any(|v| *v != 0.0));
+                    let what = format!("{level:?} {:?} {direction:?}", map.kind());
+                    assert!(blocked == *first.get_or_insert_with(|| blocked.clone()), "{what}: differs from the widest set's");
+                    assert!(blocked == run(&reversed(pairs), 2), "{what}: the two paths differ");
+                    assert!(blocked == run(pairs, 1), "{what}: the blocks depend on the thread count");
+                    // With a batch norm (+ ReLU, + a residual) on the finished rows: each path applies
+                    // it where it finishes rows, with the same result as a pass after the conv.
+                    for (relu, residual) in [(true, None), (false, Some(&residual[..]))] {
+                        let epilogue = ConvEpilogue::new(&stats, &gamma, &beta, 1e-5, relu, residual);
+                        let run = |p: &OffsetPairs| at_level!(level, |V| pair_conv::<V>(&src, c_src, &w, c_dst, n_dst, direction, p, map.identity_offset(), Some(&epilogue)));
+                        let mut expected = blocked.clone();
+                        epilogue.apply_all(&mut expected);
+                        assert!(run(pairs) == expected, "{what}: the blocks' epilogue differs from a pass after");
+                        assert!(run(&reversed(pairs)) == expected, "{what}: the per-offset path's epilogue differs");
+                    }
                 }
             }
         }

@@ -13,7 +13,7 @@
 /// An f32 vector type and the operations the micro-kernels need.
 ///
 /// # Safety
-/// Implementors' methods may only be called on CPUs with the instruction set, from code compiled
+/// Implementors' vector methods may only be called on CPUs with the instruction set, from code compiled
 /// with it (the `#[target_feature]` entry points `micro` generates); that is why every method is
 /// `unsafe`.
 pub(crate) unsafe trait Simd: Copy + Send + Sync + 'static {
@@ -28,6 +28,9 @@ pub(crate) unsafe trait Simd: Copy + Send + Sync + 'static {
     const MR: usize;
     /// The instruction set, as the benchmarks print it.
     const NAME: &'static str;
+
+    /// Whether this CPU has the instruction set (the one feature test of each set).
+    fn available() -> bool;
 
     /// The first `min(n, LANES)` lanes.
     fn mask(n: usize) -> Self::Mask;
@@ -85,11 +88,10 @@ pub(crate) fn level() -> Option<Level> {
     #[cfg(target_arch = "x86_64")]
     {
         use crate::CpuKernels;
-        let avx2 = std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma");
         match asked {
             CpuKernels::Generic => None,
-            CpuKernels::Auto if std::arch::is_x86_feature_detected!("avx512f") => Some(Level::Avx512),
-            CpuKernels::Auto | CpuKernels::Avx2 => avx2.then_some(Level::Avx2),
+            CpuKernels::Auto if Avx512::available() => Some(Level::Avx512),
+            CpuKernels::Auto | CpuKernels::Avx2 => Avx2::available().then_some(Level::Avx2),
         }
     }
     #[cfg(not(target_arch = "x86_64"))]
@@ -102,14 +104,7 @@ pub(crate) fn level() -> Option<Level> {
 /// Every level this CPU can run, widest first (the tests run each).
 #[cfg(all(test, target_arch = "x86_64"))]
 pub(crate) fn supported() -> Vec<Level> {
-    let mut found = Vec::new();
-    if std::arch::is_x86_feature_detected!("avx512f") {
-        found.push(Level::Avx512);
-    }
-    if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
-        found.push(Level::Avx2);
-    }
-    found
+    [(Avx512::available(), Level::Avx512), (Avx2::available(), Level::Avx2)].into_iter().filter_map(|(has, level)| has.then_some(level)).collect()
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -139,6 +134,10 @@ mod x86 {
         // 24 accumulators, 2 panel vectors and a broadcast of the 32 registers.
         const MR: usize = 12;
         const NAME: &'static str = "AVX-512F micro-kernels";
+
+        fn available() -> bool {
+            std::arch::is_x86_feature_detected!("avx512f")
+        }
 
         #[inline(always)]
         fn mask(n: usize) -> __mmask16 {
@@ -212,6 +211,10 @@ mod x86 {
         // 12 accumulators, 2 panel vectors and a broadcast of the 16 registers.
         const MR: usize = 6;
         const NAME: &'static str = "AVX2+FMA micro-kernels";
+
+        fn available() -> bool {
+            std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+        }
 
         #[inline(always)]
         fn mask(n: usize) -> Lanes8 {
