@@ -4,7 +4,7 @@
 //! Why not Burn's `batch_norm_train`: on the CPU backends it is composed of primitives (transposed
 //! copies of `[rows, C]` for each statistic, about a dozen passes forward and backward) and the
 //! ReLU after it is two passes more; in a MinkUNet training step that was a quarter of the time.
-//! Here the CPU backends run [`crate::cpu_norm`] (one pass per method); other backends compose
+//! Here the CPU backends run [`crate::kernels::cpu::norm`] (one pass per method); other backends compose
 //! the same math ([`composed`]), which `Fusion` fuses on GPUs.
 //!
 //! Shapes: features `[rows, C]`, `gamma` and `beta` `[C]`, `stats` `[2, C]` (mean; biased
@@ -18,11 +18,11 @@ use burn::backend::autodiff::NodeId;
 use burn::backend::autodiff::grads::Gradients;
 use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
 use burn::backend::tensor::FloatTensor;
-use burn::backend::{Autodiff, Backend, Dispatch, Flex, NdArray, Scalar, TensorMetadata, backend_extension};
+use burn::backend::{Autodiff, Backend, Dispatch, Scalar, TensorMetadata, backend_extension};
 use burn::tensor::{Shape, Slice, Tensor};
 use burn_cubecl::CubeBackend;
 
-use crate::ops::host::{Host, on_host};
+use crate::ops::host::{Host, HostFloats, on_host};
 use crate::kernels::cpu::norm as cpu_norm;
 use crate::profile::{Kernel, in_kernel};
 
@@ -110,7 +110,7 @@ pub trait BatchNormBackend: Backend {
 }
 
 /// The layer composed of Burn primitives: what GPU backends run (fused there by `Fusion`), and
-/// the reference the CPU passes are tested against. Same conventions as [`crate::cpu_norm`].
+/// the reference the CPU passes are tested against. Same conventions as [`crate::kernels::cpu::norm`].
 pub mod composed {
     use super::*;
 
@@ -218,115 +218,106 @@ fn check(x: &Shape, c: usize, what: &str) {
     assert_eq!(x[1], c, "batch norm {what}: features have {} channels, the layer {c}", x[1]);
 }
 
-macro_rules! cpu_backend {
-    ($backend:ty) => {
-        impl BatchNormBackend for $backend {
-            fn batch_norm_stats(x: FloatTensor<Self>) -> FloatTensor<Self> {
-                let shape = x.shape();
-                assert_eq!(shape.num_dims(), 2, "batch norm features must be [rows, channels], got {shape:?}");
-                let c = shape[1];
-                in_kernel(Kernel::BatchNorm, || on_host!($backend, [x], [2, c], |T| cpu_norm::channel_stats(&T::host::<Self>(&x), c)))
-            }
-            fn batch_norm_normalize(
-                x: FloatTensor<Self>,
-                stats: FloatTensor<Self>,
-                gamma: FloatTensor<Self>,
-                beta: FloatTensor<Self>,
-                epsilon: f64,
-                relu: bool,
-                _batch_stats: bool,
-            ) -> FloatTensor<Self> {
-                let shape = x.shape();
-                check(&shape, gamma.shape()[0], "forward");
-                in_kernel(Kernel::BatchNorm, || on_host!($backend, [x, stats, gamma, beta], [shape[0], shape[1]], |T| cpu_norm::normalize(
-                    &T::host::<Self>(&x),
-                    &T::host::<Self>(&stats),
-                    &T::host::<Self>(&gamma),
-                    &T::host::<Self>(&beta),
-                    epsilon,
-                    relu
-                )))
-            }
-            fn batch_norm_add_relu(
-                x: FloatTensor<Self>,
-                stats: FloatTensor<Self>,
-                gamma: FloatTensor<Self>,
-                beta: FloatTensor<Self>,
-                residual: FloatTensor<Self>,
-                epsilon: f64,
-                _batch_stats: bool,
-            ) -> FloatTensor<Self> {
-                let shape = x.shape();
-                check(&shape, gamma.shape()[0], "forward");
-                assert_eq!(residual.shape(), shape, "batch norm residual must match the features");
-                in_kernel(Kernel::BatchNorm, || on_host!($backend, [x, stats, gamma, beta, residual], [shape[0], shape[1]], |T| cpu_norm::normalize_add_relu(
-                    &T::host::<Self>(&x),
-                    &T::host::<Self>(&stats),
-                    &T::host::<Self>(&gamma),
-                    &T::host::<Self>(&beta),
-                    &T::host::<Self>(&residual),
-                    epsilon
-                )))
-            }
-            fn batch_norm_relu_grad(y: FloatTensor<Self>, grad_out: FloatTensor<Self>) -> FloatTensor<Self> {
-                let shape = y.shape();
-                assert_eq!(grad_out.shape(), shape, "ReLU output and its gradient differ in shape");
-                in_kernel(Kernel::BatchNorm, || on_host!($backend, [y, grad_out], shape.clone(), |T| cpu_norm::relu_grad(&T::host::<Self>(&y), &T::host::<Self>(&grad_out))))
-            }
-            fn batch_norm_param_grads(
-                x: FloatTensor<Self>,
-                grad_out: FloatTensor<Self>,
-                stats: FloatTensor<Self>,
-                gamma: FloatTensor<Self>,
-                beta: FloatTensor<Self>,
-                epsilon: f64,
-                relu: bool,
-            ) -> FloatTensor<Self> {
-                let c = gamma.shape()[0];
-                check(&x.shape(), c, "backward");
-                in_kernel(Kernel::BatchNorm, || on_host!($backend, [x, grad_out, stats, gamma, beta], [2, c], |T| cpu_norm::param_grads(
-                    &T::host::<Self>(&x),
-                    &T::host::<Self>(&grad_out),
-                    &T::host::<Self>(&stats),
-                    &T::host::<Self>(&gamma),
-                    &T::host::<Self>(&beta),
-                    epsilon,
-                    relu
-                )))
-            }
-            fn batch_norm_input_grad(
-                x: FloatTensor<Self>,
-                grad_out: FloatTensor<Self>,
-                stats: FloatTensor<Self>,
-                gamma: FloatTensor<Self>,
-                beta: FloatTensor<Self>,
-                param_grads: FloatTensor<Self>,
-                epsilon: f64,
-                relu: bool,
-                batch_stats: bool,
-            ) -> FloatTensor<Self> {
-                let shape = x.shape();
-                check(&shape, gamma.shape()[0], "backward");
-                in_kernel(Kernel::BatchNorm, || on_host!($backend, [x, grad_out, stats, gamma, beta, param_grads], [shape[0], shape[1]], |T| cpu_norm::input_grad(
-                    &T::host::<Self>(&x),
-                    &T::host::<Self>(&grad_out),
-                    &T::host::<Self>(&stats),
-                    &T::host::<Self>(&gamma),
-                    &T::host::<Self>(&beta),
-                    &T::host::<Self>(&param_grads),
-                    epsilon,
-                    relu,
-                    batch_stats
-                )))
-            }
-        }
-    };
-}
-
-mod cpu_impls {
-    use super::*;
-    cpu_backend!(NdArray);
-    cpu_backend!(Flex);
+/// The CPU kernels, on every backend that keeps its values on the host (flex, ndarray).
+impl<B: HostFloats> BatchNormBackend for B {
+    fn batch_norm_stats(x: FloatTensor<Self>) -> FloatTensor<Self> {
+        let shape = x.shape();
+        assert_eq!(shape.num_dims(), 2, "batch norm features must be [rows, channels], got {shape:?}");
+        let c = shape[1];
+        in_kernel(Kernel::BatchNorm, || on_host!(Self, [x], [2, c], |T| cpu_norm::channel_stats(&T::host::<Self>(&x), c)))
+    }
+    fn batch_norm_normalize(
+        x: FloatTensor<Self>,
+        stats: FloatTensor<Self>,
+        gamma: FloatTensor<Self>,
+        beta: FloatTensor<Self>,
+        epsilon: f64,
+        relu: bool,
+        _batch_stats: bool,
+    ) -> FloatTensor<Self> {
+        let shape = x.shape();
+        check(&shape, gamma.shape()[0], "forward");
+        in_kernel(Kernel::BatchNorm, || on_host!(Self, [x, stats, gamma, beta], [shape[0], shape[1]], |T| cpu_norm::normalize(
+            &T::host::<Self>(&x),
+            &T::host::<Self>(&stats),
+            &T::host::<Self>(&gamma),
+            &T::host::<Self>(&beta),
+            epsilon,
+            relu
+        )))
+    }
+    fn batch_norm_add_relu(
+        x: FloatTensor<Self>,
+        stats: FloatTensor<Self>,
+        gamma: FloatTensor<Self>,
+        beta: FloatTensor<Self>,
+        residual: FloatTensor<Self>,
+        epsilon: f64,
+        _batch_stats: bool,
+    ) -> FloatTensor<Self> {
+        let shape = x.shape();
+        check(&shape, gamma.shape()[0], "forward");
+        assert_eq!(residual.shape(), shape, "batch norm residual must match the features");
+        in_kernel(Kernel::BatchNorm, || on_host!(Self, [x, stats, gamma, beta, residual], [shape[0], shape[1]], |T| cpu_norm::normalize_add_relu(
+            &T::host::<Self>(&x),
+            &T::host::<Self>(&stats),
+            &T::host::<Self>(&gamma),
+            &T::host::<Self>(&beta),
+            &T::host::<Self>(&residual),
+            epsilon
+        )))
+    }
+    fn batch_norm_relu_grad(y: FloatTensor<Self>, grad_out: FloatTensor<Self>) -> FloatTensor<Self> {
+        let shape = y.shape();
+        assert_eq!(grad_out.shape(), shape, "ReLU output and its gradient differ in shape");
+        in_kernel(Kernel::BatchNorm, || on_host!(Self, [y, grad_out], shape.clone(), |T| cpu_norm::relu_grad(&T::host::<Self>(&y), &T::host::<Self>(&grad_out))))
+    }
+    fn batch_norm_param_grads(
+        x: FloatTensor<Self>,
+        grad_out: FloatTensor<Self>,
+        stats: FloatTensor<Self>,
+        gamma: FloatTensor<Self>,
+        beta: FloatTensor<Self>,
+        epsilon: f64,
+        relu: bool,
+    ) -> FloatTensor<Self> {
+        let c = gamma.shape()[0];
+        check(&x.shape(), c, "backward");
+        in_kernel(Kernel::BatchNorm, || on_host!(Self, [x, grad_out, stats, gamma, beta], [2, c], |T| cpu_norm::param_grads(
+            &T::host::<Self>(&x),
+            &T::host::<Self>(&grad_out),
+            &T::host::<Self>(&stats),
+            &T::host::<Self>(&gamma),
+            &T::host::<Self>(&beta),
+            epsilon,
+            relu
+        )))
+    }
+    fn batch_norm_input_grad(
+        x: FloatTensor<Self>,
+        grad_out: FloatTensor<Self>,
+        stats: FloatTensor<Self>,
+        gamma: FloatTensor<Self>,
+        beta: FloatTensor<Self>,
+        param_grads: FloatTensor<Self>,
+        epsilon: f64,
+        relu: bool,
+        batch_stats: bool,
+    ) -> FloatTensor<Self> {
+        let shape = x.shape();
+        check(&shape, gamma.shape()[0], "backward");
+        in_kernel(Kernel::BatchNorm, || on_host!(Self, [x, grad_out, stats, gamma, beta, param_grads], [shape[0], shape[1]], |T| cpu_norm::input_grad(
+            &T::host::<Self>(&x),
+            &T::host::<Self>(&grad_out),
+            &T::host::<Self>(&stats),
+            &T::host::<Self>(&gamma),
+            &T::host::<Self>(&beta),
+            &T::host::<Self>(&param_grads),
+            epsilon,
+            relu,
+            batch_stats
+        )))
+    }
 }
 
 /// The composition (the trait's default bodies).

@@ -13,10 +13,10 @@ use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
 use burn::backend::autodiff::grads::Gradients;
 use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
 use burn::backend::tensor::FloatTensor;
-use burn::backend::{Autodiff, Backend, Dispatch, Flex, NdArray, TensorMetadata, backend_extension};
+use burn::backend::{Autodiff, Backend, Dispatch, TensorMetadata, backend_extension};
 use burn::tensor::{Shape, Slice, Tensor};
 use burn_cubecl::CubeBackend;
-use crate::ops::host::{Host, on_host};
+use crate::ops::host::{Host, HostFloats, on_host};
 use crate::kernels::cpu::{Element, filled_in_chunks};
 
 /// A backend that concatenates and splits `[rows, C]` features along the channels.
@@ -73,27 +73,18 @@ pub fn channel_rows<T: Element>(x: &[T], c: usize, start: usize, end: usize) -> 
     })
 }
 
-macro_rules! cpu_backend {
-    ($backend:ty) => {
-        impl ChannelConcatBackend for $backend {
-            fn concat_channels(a: FloatTensor<Self>, b: FloatTensor<Self>) -> FloatTensor<Self> {
-                let (sa, sb) = (a.shape(), b.shape());
-                assert!(sa.num_dims() == 2 && sb.num_dims() == 2 && sa[0] == sb[0], "channel concatenation needs [rows, C] features of equal rows, got {sa:?} and {sb:?}");
-                on_host!($backend, [a, b], [sa[0], sa[1] + sb[1]], |T| concat_rows(&T::host::<Self>(&a), sa[1], &T::host::<Self>(&b), sb[1]))
-            }
-            fn channel_range(x: FloatTensor<Self>, start: usize, end: usize) -> FloatTensor<Self> {
-                let s = x.shape();
-                assert_eq!(s.num_dims(), 2, "channel range of [rows, C] features, got {s:?}");
-                on_host!($backend, [x], [s[0], end - start], |T| channel_rows(&T::host::<Self>(&x), s[1], start, end))
-            }
-        }
-    };
-}
-
-mod cpu_impls {
-    use super::*;
-    cpu_backend!(NdArray);
-    cpu_backend!(Flex);
+/// The CPU kernels, on every backend that keeps its values on the host (flex, ndarray).
+impl<B: HostFloats> ChannelConcatBackend for B {
+    fn concat_channels(a: FloatTensor<Self>, b: FloatTensor<Self>) -> FloatTensor<Self> {
+        let (sa, sb) = (a.shape(), b.shape());
+        assert!(sa.num_dims() == 2 && sb.num_dims() == 2 && sa[0] == sb[0], "channel concatenation needs [rows, C] features of equal rows, got {sa:?} and {sb:?}");
+        on_host!(Self, [a, b], [sa[0], sa[1] + sb[1]], |T| concat_rows(&T::host::<Self>(&a), sa[1], &T::host::<Self>(&b), sb[1]))
+    }
+    fn channel_range(x: FloatTensor<Self>, start: usize, end: usize) -> FloatTensor<Self> {
+        let s = x.shape();
+        assert_eq!(s.num_dims(), 2, "channel range of [rows, C] features, got {s:?}");
+        on_host!(Self, [x], [s[0], end - start], |T| channel_rows(&T::host::<Self>(&x), s[1], start, end))
+    }
 }
 
 /// Burn's `cat` and `slice` (the trait's default bodies).

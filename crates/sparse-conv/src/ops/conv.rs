@@ -13,7 +13,7 @@ use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
 use burn::backend::autodiff::grads::Gradients;
 use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
 use burn::backend::tensor::{FloatTensor, IndexingUpdateOp, IntTensor};
-use burn::backend::{Autodiff, Backend, Dispatch, Flex, NdArray, TensorMetadata, backend_extension};
+use burn::backend::{Autodiff, Backend, Dispatch, TensorMetadata, backend_extension};
 use burn_cubecl::CubeBackend;
 use burn::tensor::{Shape, Tensor, TensorData};
 
@@ -187,29 +187,20 @@ fn check_shapes(features: &Shape, weight: &Shape, n_in: usize, volume: usize) {
     assert_eq!(features[1], weight[1], "features have {} channels, the weight expects {}", features[1], weight[1]);
 }
 
-macro_rules! cpu_backend {
-    ($backend:ty) => {
-        impl SparseConvBackend for $backend {
-            fn sparse_conv(features: FloatTensor<Self>, weight: FloatTensor<Self>, map: Arc<KernelMap>) -> FloatTensor<Self> {
-                cpu_forward::<Self>(features, weight, &map, None)
-            }
-            fn sparse_conv_input_grad(grad_out: FloatTensor<Self>, weight: FloatTensor<Self>, map: Arc<KernelMap>) -> FloatTensor<Self> {
-                cpu_input_grad::<Self>(grad_out, weight, &map)
-            }
-            fn sparse_conv_weight_grad(features: FloatTensor<Self>, grad_out: FloatTensor<Self>, map: Arc<KernelMap>) -> FloatTensor<Self> {
-                cpu_weight_grad::<Self>(features, grad_out, &map)
-            }
-        }
-    };
+/// The CPU kernels, on every backend that keeps its values on the host (flex, ndarray).
+impl<B: HostFloats> SparseConvBackend for B {
+    fn sparse_conv(features: FloatTensor<Self>, weight: FloatTensor<Self>, map: Arc<KernelMap>) -> FloatTensor<Self> {
+        cpu_forward::<Self>(features, weight, &map, None)
+    }
+    fn sparse_conv_input_grad(grad_out: FloatTensor<Self>, weight: FloatTensor<Self>, map: Arc<KernelMap>) -> FloatTensor<Self> {
+        cpu_input_grad::<Self>(grad_out, weight, &map)
+    }
+    fn sparse_conv_weight_grad(features: FloatTensor<Self>, grad_out: FloatTensor<Self>, map: Arc<KernelMap>) -> FloatTensor<Self> {
+        cpu_weight_grad::<Self>(features, grad_out, &map)
+    }
 }
 
-mod cpu_impls {
-    use super::*;
-    cpu_backend!(NdArray);
-    cpu_backend!(Flex);
-}
-
-/// CubeCL kernels for f32 ([`crate::cube`]), the composition for other dtypes.
+/// CubeCL kernels for f32 ([`crate::kernels::cube`]), the composition for other dtypes.
 impl SparseConvBackend for CubeBackend {
     fn sparse_conv(features: FloatTensor<Self>, weight: FloatTensor<Self>, map: Arc<KernelMap>) -> FloatTensor<Self> {
         check_shapes(&features.shape(), &weight.shape(), map.n_in(), map.volume());

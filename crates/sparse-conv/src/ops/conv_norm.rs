@@ -11,10 +11,11 @@ use std::sync::Arc;
 
 use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
 use burn::backend::tensor::FloatTensor;
-use burn::backend::{Autodiff, Dispatch, Flex, NdArray, backend_extension};
+use burn::backend::{Autodiff, Dispatch, backend_extension};
 use burn::tensor::{Shape, Tensor};
 use burn_cubecl::CubeBackend;
 
+use crate::ops::host::HostFloats;
 use crate::ops::conv::{NormAfterConv, SparseConvBackend, cpu_forward};
 use crate::ops::batch_norm::{BatchNormBackend, Epilogue};
 use crate::geometry::kernel_map::KernelMap;
@@ -58,43 +59,34 @@ pub trait ConvNormBackend: SparseConvBackend + BatchNormBackend {
     }
 }
 
-macro_rules! cpu_backend {
-    ($backend:ty) => {
-        impl ConvNormBackend for $backend {
-            fn sparse_conv_norm(
-                features: FloatTensor<Self>,
-                weight: FloatTensor<Self>,
-                map: Arc<KernelMap>,
-                stats: FloatTensor<Self>,
-                gamma: FloatTensor<Self>,
-                beta: FloatTensor<Self>,
-                epsilon: f64,
-                relu: bool,
-            ) -> FloatTensor<Self> {
-                let norm = NormAfterConv { stats, gamma, beta, residual: None, epsilon, relu };
-                cpu_forward::<Self>(features, weight, &map, Some(&norm))
-            }
-            fn sparse_conv_norm_add_relu(
-                features: FloatTensor<Self>,
-                weight: FloatTensor<Self>,
-                map: Arc<KernelMap>,
-                stats: FloatTensor<Self>,
-                gamma: FloatTensor<Self>,
-                beta: FloatTensor<Self>,
-                residual: FloatTensor<Self>,
-                epsilon: f64,
-            ) -> FloatTensor<Self> {
-                let norm = NormAfterConv { stats, gamma, beta, residual: Some(residual), epsilon, relu: true };
-                cpu_forward::<Self>(features, weight, &map, Some(&norm))
-            }
-        }
-    };
-}
-
-mod cpu_impls {
-    use super::*;
-    cpu_backend!(NdArray);
-    cpu_backend!(Flex);
+/// The CPU kernels, on every backend that keeps its values on the host (flex, ndarray).
+impl<B: HostFloats> ConvNormBackend for B {
+    fn sparse_conv_norm(
+        features: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        map: Arc<KernelMap>,
+        stats: FloatTensor<Self>,
+        gamma: FloatTensor<Self>,
+        beta: FloatTensor<Self>,
+        epsilon: f64,
+        relu: bool,
+    ) -> FloatTensor<Self> {
+        let norm = NormAfterConv { stats, gamma, beta, residual: None, epsilon, relu };
+        cpu_forward::<Self>(features, weight, &map, Some(&norm))
+    }
+    fn sparse_conv_norm_add_relu(
+        features: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        map: Arc<KernelMap>,
+        stats: FloatTensor<Self>,
+        gamma: FloatTensor<Self>,
+        beta: FloatTensor<Self>,
+        residual: FloatTensor<Self>,
+        epsilon: f64,
+    ) -> FloatTensor<Self> {
+        let norm = NormAfterConv { stats, gamma, beta, residual: Some(residual), epsilon, relu: true };
+        cpu_forward::<Self>(features, weight, &map, Some(&norm))
+    }
 }
 
 /// The conv's kernels, then the norm's (the trait's default bodies).
@@ -104,7 +96,7 @@ impl ConvNormBackend for CubeBackend {}
 impl<B: ConvNormBackend, C: CheckpointStrategy> ConvNormBackend for Autodiff<B, C> {}
 
 /// `epilogue(batch_norm(sparse_conv(features, weight, map)))` with the statistics `mean`, `var`
-/// (inference: the running averages): [`crate::ops::batch_norm_eval`] of [`crate::sparse_conv`], in
+/// (inference: the running averages): [`crate::batch_norm_eval`] of [`crate::sparse_conv`], in
 /// one op where the backend has one.
 #[allow(clippy::too_many_arguments)]
 pub fn sparse_conv_norm_eval(

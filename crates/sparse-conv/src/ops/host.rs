@@ -14,7 +14,8 @@ use crate::kernels::cpu::Element;
 
 /// Read access to a CPU backend's float values, without a copy when the tensor is contiguous
 /// (reading through `into_data` copies every tensor autodiff also holds, element by element on
-/// ndarray).
+/// ndarray). Every op implements its backend trait once for all backends with this trait, on
+/// the CPU kernels; a new host backend needs only an impl here.
 pub(crate) trait HostFloats: Backend {
     /// The f32 values, row-major.
     fn host_f32(t: &FloatTensor<Self>) -> Cow<'_, [f32]>;

@@ -18,7 +18,7 @@
 
 use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
 use burn::backend::tensor::FloatTensor;
-use burn::backend::{Autodiff, Backend, Dispatch, Flex, NdArray, Scalar, TensorMetadata, backend_extension};
+use burn::backend::{Autodiff, Backend, Dispatch, Scalar, TensorMetadata, backend_extension};
 use burn::config::Config;
 use burn::grad_clipping::GradientClippingConfig;
 use burn::optim::decay::WeightDecayConfig;
@@ -26,7 +26,7 @@ use burn::optim::{Adam, AdamState, AdaptiveMomentumState, LearningRate, ModuleOp
 use burn::tensor::{Device, Shape, Slice, Tensor};
 use burn_cubecl::CubeBackend;
 
-use crate::ops::host::{Host, on_host};
+use crate::ops::host::{Host, HostFloats, on_host};
 use crate::kernels::cpu::adam::{AdamScalars, adam_update};
 
 /// A backend that runs one Adam step of a flat parameter.
@@ -96,41 +96,32 @@ pub fn composed<B: Backend>(
 }
 
 
-macro_rules! cpu_backend {
-    ($backend:ty) => {
-        impl AdamBackend for $backend {
-            fn adam_step(
-                param: FloatTensor<Self>,
-                grad: FloatTensor<Self>,
-                moment_1: FloatTensor<Self>,
-                moment_2: FloatTensor<Self>,
-                max_moment_2: FloatTensor<Self>,
-                amsgrad: bool,
-                lr: f64,
-                beta_1: f64,
-                beta_2: f64,
-                weight_decay: f64,
-                correction: f64,
-                epsilon: f64,
-            ) -> FloatTensor<Self> {
-                let n = param.shape().num_elements();
-                on_host!($backend, [param, grad, moment_1, moment_2, max_moment_2], [3 + amsgrad as usize, n], |T| {
-                    let s = AdamScalars::<T>::new(lr, beta_1, beta_2, weight_decay, correction, epsilon);
-                    let max = amsgrad.then(|| T::host::<Self>(&max_moment_2));
-                    adam_update(&T::host::<Self>(&param), &T::host::<Self>(&grad), &T::host::<Self>(&moment_1), &T::host::<Self>(&moment_2), max.as_deref(), s)
-                })
-            }
-        }
-    };
+/// The CPU kernels, on every backend that keeps its values on the host (flex, ndarray).
+impl<B: HostFloats> AdamBackend for B {
+    fn adam_step(
+        param: FloatTensor<Self>,
+        grad: FloatTensor<Self>,
+        moment_1: FloatTensor<Self>,
+        moment_2: FloatTensor<Self>,
+        max_moment_2: FloatTensor<Self>,
+        amsgrad: bool,
+        lr: f64,
+        beta_1: f64,
+        beta_2: f64,
+        weight_decay: f64,
+        correction: f64,
+        epsilon: f64,
+    ) -> FloatTensor<Self> {
+        let n = param.shape().num_elements();
+        on_host!(Self, [param, grad, moment_1, moment_2, max_moment_2], [3 + amsgrad as usize, n], |T| {
+            let s = AdamScalars::<T>::new(lr, beta_1, beta_2, weight_decay, correction, epsilon);
+            let max = amsgrad.then(|| T::host::<Self>(&max_moment_2));
+            adam_update(&T::host::<Self>(&param), &T::host::<Self>(&grad), &T::host::<Self>(&moment_1), &T::host::<Self>(&moment_2), max.as_deref(), s)
+        })
+    }
 }
 
-mod cpu_impls {
-    use super::*;
-    cpu_backend!(NdArray);
-    cpu_backend!(Flex);
-}
-
-/// The f32 kernel of [`crate::cube`], Burn's primitives for other dtypes.
+/// The f32 kernel of [`crate::kernels::cube`], Burn's primitives for other dtypes.
 impl AdamBackend for CubeBackend {
     fn adam_step(
         param: FloatTensor<Self>,
