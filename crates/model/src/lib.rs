@@ -17,7 +17,6 @@
 
 #![warn(missing_docs)]
 
-/// Timing and memory of a forward pass and a training step.
 /// The dense CenterPoint-style baseline.
 pub mod centerpoint;
 /// The model a run trains.

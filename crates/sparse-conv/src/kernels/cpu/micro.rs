@@ -698,7 +698,7 @@ pub(crate) fn weight_grad<V: TileKernels>(x: &[f32], c_in: usize, grad_out: &[f3
     unsafe { assume_init(grad) }
 }
 
-/// Rows per block of the batch-norm sums: as [`crate::cpu_norm`]'s blocks, so the sums are its
+/// Rows per block of the batch-norm sums: as [`crate::kernels::cpu::norm`]'s blocks, so the sums are its
 /// bits.
 const NORM_BLOCK_ROWS: usize = 16;
 
@@ -717,7 +717,7 @@ unsafe fn add_to_totals<V: Simd>(s1: V::V, s2: V::V, t1: *mut f64, t2: *mut f64,
     }
 }
 
-/// [`crate::cpu_norm`]'s channel statistics sums over `x`'s rows (`c` channels): `[Σ d; Σ d²]`
+/// [`crate::kernels::cpu::norm`]'s channel statistics sums over `x`'s rows (`c` channels): `[Σ d; Σ d²]`
 /// with `d = x − shift`, in blocks of 16 rows summed in f32 then added in f64, as the general
 /// loops do, so the same bits.
 pub(crate) fn stats_sums<V: TileKernels>(x: &[f32], c: usize, shift: &[f32]) -> Vec<f64> {
@@ -755,7 +755,7 @@ unsafe fn stats_block<V: Simd>(x: &[f32], c: usize, shift: &[f32], total: &mut [
     }
 }
 
-/// [`crate::cpu_norm`]'s batch-norm parameter-gradient sums over the rows of `x` and `g`:
+/// [`crate::kernels::cpu::norm`]'s batch-norm parameter-gradient sums over the rows of `x` and `g`:
 /// `[Σ dz·(x − mean); Σ dz]`, `dz = g` masked where `x·a + b ≤ 0` (with `relu`); blocks as
 /// [`stats_sums`], the same bits as the general loops.
 #[allow(clippy::too_many_arguments)]

@@ -21,9 +21,10 @@ mod micro;
 mod native;
 pub mod norm;
 #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
-pub(crate) mod simd;
+mod simd;
 
 pub use conv::{pair_conv, weight_grad};
 pub use element::{Element, PairDirection, RowEpilogue};
 pub(crate) use element::filled_in_chunks;
-pub(crate) use simd::{Level, level};
+pub(crate) use simd::Level;
+pub use simd::{cpu_features, cpu_kernel_path};

@@ -101,6 +101,37 @@ pub(crate) fn level() -> Option<Level> {
     }
 }
 
+/// The CPU's SIMD features that matter to the op's kernels, as the benchmarks print them
+/// (e.g. `avx512f avx2 fma`; empty where none are detected or on other architectures).
+pub fn cpu_features() -> String {
+    let mut found: Vec<&str> = Vec::new();
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx512f") {
+            found.push("avx512f");
+        }
+        if std::arch::is_x86_feature_detected!("avx2") {
+            found.push("avx2");
+        }
+        if std::arch::is_x86_feature_detected!("fma") {
+            found.push("fma");
+        }
+    }
+    #[cfg(target_arch = "aarch64")]
+    if std::arch::is_aarch64_feature_detected!("neon") {
+        found.push("neon");
+    }
+    found.join(" ")
+}
+
+/// Which path the op's f32 CPU kernels take on this machine under the current options.
+pub fn cpu_kernel_path() -> &'static str {
+    match level() {
+        Some(level) => level.name(),
+        None => "generic gather–GEMM–scatter (matrixmultiply)",
+    }
+}
+
 /// Every level this CPU can run, widest first (the tests run each).
 #[cfg(all(test, target_arch = "x86_64"))]
 pub(crate) fn supported() -> Vec<Level> {
