@@ -37,7 +37,6 @@ pub mod lzf;
 /// PCD reader and writer.
 pub mod pcd;
 /// The JRDB-format simulator.
-#[allow(missing_docs)]
 pub mod sim;
 /// Layout of a tree and its splits.
 pub mod split;

@@ -28,19 +28,51 @@ pub enum Shape {
     /// The horizontal plane at height z (floor or ceiling), seen from either side.
     PlaneZ(f64),
     /// A box of half sizes `half` about centre `c`, turned by `yaw` about z.
-    Cuboid { c: V3, half: V3, yaw: f64 },
+    Cuboid {
+        /// Centre.
+        c: V3,
+        /// Half sizes along the box's own x, y, z.
+        half: V3,
+        /// Turn about z (radians).
+        yaw: f64,
+    },
     /// An upright capped cylinder.
-    Cylinder { c: [f64; 2], r: f64, z0: f64, z1: f64 },
+    Cylinder {
+        /// Axis position (x, y).
+        c: [f64; 2],
+        /// Radius.
+        r: f64,
+        /// Bottom cap height.
+        z0: f64,
+        /// Top cap height.
+        z1: f64,
+    },
     /// All points within `r` of the segment a–b.
-    Capsule { a: V3, b: V3, r: f64 },
+    Capsule {
+        /// One end of the segment.
+        a: V3,
+        /// The other end.
+        b: V3,
+        /// Radius.
+        r: f64,
+    },
     /// An ellipsoid with semi-axes `radii` along its own x, y, z, turned by `yaw` about z.
-    Ellipsoid { c: V3, radii: V3, yaw: f64 },
+    Ellipsoid {
+        /// Centre.
+        c: V3,
+        /// Semi-axes along its own x, y, z.
+        radii: V3,
+        /// Turn about z (radians).
+        yaw: f64,
+    },
 }
 
 /// A ray hit: distance along the unit direction and the unit surface normal there.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Hit {
+    /// Distance along the ray's unit direction.
     pub t: f64,
+    /// Unit surface normal at the hit.
     pub normal: V3,
 }
 

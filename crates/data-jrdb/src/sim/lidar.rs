@@ -33,7 +33,9 @@ impl Default for Vlp16 {
 /// One return in the sensor frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Return {
+    /// Position in the sensor frame (m).
     pub xyz: V3,
+    /// Return strength (0–255): the surface's reflectivity, the incidence angle and the range.
     pub intensity: f32,
     /// Beam index, 0 = lowest (−15°).
     pub ring: u16,

@@ -15,9 +15,15 @@ pub enum Activity {
     /// Standing still (weight shifting slightly).
     Standing,
     /// Walking at `speed` m/s with swinging legs and arms.
-    Walking { speed: f64 },
+    Walking {
+        /// Walking speed (m/s).
+        speed: f64,
+    },
     /// Sitting on a seat of the given height.
-    Sitting { seat: f64 },
+    Sitting {
+        /// Seat height above the floor (m).
+        seat: f64,
+    },
 }
 
 /// How the arms are held.
@@ -34,14 +40,23 @@ pub enum Arms {
 /// The body of one person: sizes that stay fixed over a sequence.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Body {
+    /// Standing height (m).
     pub height: f64,
+    /// Half the shoulder width (m).
     pub shoulder: f64,
+    /// Half the distance between the hip joints (m).
     pub hip: f64,
+    /// The torso's half depth, front to back (m).
     pub depth: f64,
+    /// Leg radius (m).
     pub leg_r: f64,
+    /// Arm radius (m).
     pub arm_r: f64,
+    /// The head's semi-axes: front to back, side to side, up (m).
     pub head: V3,
+    /// How the arms are held.
     pub arms: Arms,
+    /// A backpack on the back: one of the cues to which way the person faces.
     pub backpack: bool,
     /// Long coat or dress: a wider lower torso.
     pub coat: bool,

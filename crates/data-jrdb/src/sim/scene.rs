@@ -36,6 +36,7 @@ impl SceneKind {
 /// A surface of the scene and whose it is.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Prim {
+    /// Its geometry.
     pub shape: Shape,
     /// Fraction of the beam sent back (drives intensity and dropouts).
     pub reflectivity: f32,
@@ -57,6 +58,7 @@ struct Person {
 /// A scene that evolves over the frames of one sequence.
 #[derive(Debug, Clone)]
 pub struct Scene {
+    /// The layout it was built as.
     pub kind: SceneKind,
     /// Floor height in the world (= base) frame: the robot base is this far above the floor.
     pub floor: f64,
@@ -75,7 +77,9 @@ pub struct Scene {
 /// A labelled person in one frame: world-frame box and stable id.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PersonView {
+    /// The person's id, stable over the sequence.
     pub id: usize,
+    /// The labelled box in the world frame.
     pub bbox: Box3d,
 }
 

@@ -107,9 +107,13 @@ impl Default for SynthConfig {
 /// What `synth` wrote.
 #[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
 pub struct SynthSummary {
+    /// The sequences' names.
     pub sequences: Vec<String>,
+    /// Frames in all.
     pub frames: usize,
+    /// Points in all (both sensors).
     pub points: usize,
+    /// Labelled boxes in all.
     pub boxes: usize,
 }
 
