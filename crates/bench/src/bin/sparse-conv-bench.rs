@@ -1,6 +1,6 @@
 //! Times kernel-map builds and the sparse convolution's forward and backward on a voxel scene.
 //!
-//! `cargo run -p bench --bin sparse-conv-bench -- --coords ../shared/bench/scene_jrdb_like.npy`
+//! `cargo run -p bench --bin sparse-conv-bench -- --coords bench/scene_jrdb_like.npy`
 
 use std::path::PathBuf;
 use std::sync::Arc;
