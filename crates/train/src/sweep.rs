@@ -208,9 +208,12 @@ pub fn rescore(job: &Job, verbose: bool) -> Result<Option<TrainSummary>> {
 }
 
 /// Runs every job not finished yet with `run_job` (which trains into `job.dir`, resuming what is
-/// there), then writes the results. A failed job is reported and the others still run.
+/// there). The results are written before the first job and after each one, so a sweep stopped
+/// after hours still has the tables of the runs it finished. A failed job is reported and the
+/// others still run.
 pub fn run_sweep(sweep: &SweepConfig, jobs: &[Job], mut run_job: impl FnMut(&Job) -> Result<TrainSummary>, verbose: bool) -> Result<SweepResults> {
     std::fs::create_dir_all(sweep.dir())?;
+    aggregate(jobs).write(&sweep.dir())?;
     let mut failures = Vec::new();
     for (i, job) in jobs.iter().enumerate() {
         if finished(&job.dir).is_some() {
@@ -226,6 +229,7 @@ pub fn run_sweep(sweep: &SweepConfig, jobs: &[Job], mut run_job: impl FnMut(&Job
             eprintln!("{} seed {} failed: {e:#}", job.variant, job.seed);
             failures.push(format!("{} seed {}: {e:#}", job.variant, job.seed));
         }
+        aggregate(jobs).write(&sweep.dir())?;
     }
     let results = aggregate(jobs);
     results.write(&sweep.dir())?;

@@ -145,6 +145,15 @@ fn sweep_skips_finished_runs_and_aggregates_seeds() {
         &jobs,
         |j| {
             ran.push((j.variant.clone(), j.seed));
+            // The tables are written before the first job and after each: at "a" seed 1, seed 0
+            // of "a" and the earlier run of "b" are in them.
+            let md = std::fs::read_to_string(sweep.dir().join("results.md")).unwrap();
+            let expected = match (j.variant.as_str(), j.seed) {
+                ("a", 0) => "| a | person_minkunet | 0/2 |",
+                ("a", 1) => "| a | person_minkunet | 1/2 |",
+                _ => "| a | person_minkunet | 2/2 |",
+            };
+            assert!(md.contains(expected) && md.contains("| b | centerpoint | 1/2 |"), "{md}");
             Ok(fake_summary(&j.dir, if j.variant == "a" { 0.4 + 0.2 * j.seed as f64 } else { 0.7 }, true))
         },
         false,
