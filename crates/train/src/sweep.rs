@@ -213,7 +213,8 @@ pub fn rescore(job: &Job, verbose: bool) -> Result<Option<TrainSummary>> {
 /// others still run.
 pub fn run_sweep(sweep: &SweepConfig, jobs: &[Job], mut run_job: impl FnMut(&Job) -> Result<TrainSummary>, verbose: bool) -> Result<SweepResults> {
     std::fs::create_dir_all(sweep.dir())?;
-    aggregate(jobs).write(&sweep.dir())?;
+    let mut results = aggregate(jobs);
+    results.write(&sweep.dir())?;
     let mut failures = Vec::new();
     for (i, job) in jobs.iter().enumerate() {
         if finished(&job.dir).is_some() {
@@ -229,10 +230,9 @@ pub fn run_sweep(sweep: &SweepConfig, jobs: &[Job], mut run_job: impl FnMut(&Job
             eprintln!("{} seed {} failed: {e:#}", job.variant, job.seed);
             failures.push(format!("{} seed {}: {e:#}", job.variant, job.seed));
         }
-        aggregate(jobs).write(&sweep.dir())?;
+        results = aggregate(jobs);
+        results.write(&sweep.dir())?;
     }
-    let results = aggregate(jobs);
-    results.write(&sweep.dir())?;
     if !failures.is_empty() {
         bail!("{} of {} runs failed:\n{}", failures.len(), jobs.len(), failures.join("\n"));
     }
