@@ -14,7 +14,8 @@
 //! - [`tensor`]: [`SparseTensor`], features with coordinates and a shared map cache.
 //! - [`modules`]: convolutions, batch norm, linear and U-Net blocks.
 //! - [`profile`]: the kernels' own time and operation counters.
-//! - [`wgpu_device`]: the wgpu device on the platform's native graphics API (never OpenGL).
+//! - [`wgpu_device`]: the wgpu device on the platform's native graphics API (never OpenGL); an
+//!   error in a build without the `wgpu` feature (CPU only).
 
 #![warn(missing_docs)]
 

@@ -3,4 +3,5 @@
 
 pub mod coords;
 pub mod kernel_map;
+#[cfg(feature = "wgpu")]
 pub(crate) mod row_tiles;

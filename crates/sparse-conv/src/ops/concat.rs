@@ -14,22 +14,23 @@ use burn::backend::autodiff::grads::Gradients;
 use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
 use burn::backend::tensor::FloatTensor;
 use burn::backend::{Autodiff, Backend, Dispatch, TensorMetadata, backend_extension};
-use burn::tensor::{Shape, Slice, Tensor};
+use burn::tensor::{Slice, Tensor};
+#[cfg(feature = "wgpu")]
 use burn_cubecl::CubeBackend;
 use crate::ops::host::{Host, HostFloats, on_host};
 use crate::kernels::cpu::{Element, filled_in_chunks};
 
 /// A backend that concatenates and splits `[rows, C]` features along the channels.
-#[backend_extension(NdArray, Flex, Cube, Fusion, Autodiff)]
+#[backend_extension(NdArray, Flex, Cube: cfg(feature = "wgpu"), Fusion: cfg(feature = "wgpu"), Autodiff)]
 pub trait ChannelConcatBackend: Backend {
     /// `[a | b]` row by row: `[rows, C_a + C_b]`.
-    #[fusion(dtype = a, shape = Shape::new([a[0], a[1] + b[1]]))]
+    #[fusion(dtype = a, shape = burn::tensor::Shape::new([a[0], a[1] + b[1]]))]
     fn concat_channels(a: FloatTensor<Self>, b: FloatTensor<Self>) -> FloatTensor<Self> {
         Self::float_cat(vec![a, b], 1)
     }
 
     /// Channels `start..end` of `x`, `[rows, end − start]`.
-    #[fusion(dtype = x, shape = Shape::new([x[0], end - start]))]
+    #[fusion(dtype = x, shape = burn::tensor::Shape::new([x[0], end - start]))]
     fn channel_range(x: FloatTensor<Self>, start: usize, end: usize) -> FloatTensor<Self> {
         let rows = x.shape()[0];
         Self::float_slice(x, &[Slice::from(0..rows), Slice::from(start..end)])
@@ -88,6 +89,7 @@ impl<B: HostFloats> ChannelConcatBackend for B {
 }
 
 /// Burn's `cat` and `slice` (the trait's default bodies).
+#[cfg(feature = "wgpu")]
 impl ChannelConcatBackend for CubeBackend {}
 
 #[derive(Debug)]

@@ -12,7 +12,8 @@ use std::sync::Arc;
 use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
 use burn::backend::tensor::FloatTensor;
 use burn::backend::{Autodiff, Dispatch, backend_extension};
-use burn::tensor::{Shape, Tensor};
+use burn::tensor::Tensor;
+#[cfg(feature = "wgpu")]
 use burn_cubecl::CubeBackend;
 
 use crate::ops::host::HostFloats;
@@ -24,11 +25,11 @@ use crate::ops::conv::check_conv_inputs;
 /// A backend that runs a sparse convolution and the batch norm after it (fixed statistics) as
 /// one op. Shapes as [`SparseConvBackend::sparse_conv`]'s; `stats` is `[2, C_out]` (mean, biased
 /// variance), `gamma` and `beta` `[C_out]`.
-#[backend_extension(NdArray, Flex, Cube, Fusion, Autodiff)]
+#[backend_extension(NdArray, Flex, Cube: cfg(feature = "wgpu"), Fusion: cfg(feature = "wgpu"), Autodiff)]
 pub trait ConvNormBackend: SparseConvBackend + BatchNormBackend {
     /// `relu?((conv(x) − mean)·γ/√(var + ε) + β)`.
     #[allow(clippy::too_many_arguments)]
-    #[fusion(dtype = features, shape = Shape::new([map.n_out(), weight[2]]))]
+    #[fusion(dtype = features, shape = burn::tensor::Shape::new([map.n_out(), weight[2]]))]
     fn sparse_conv_norm(
         features: FloatTensor<Self>,
         weight: FloatTensor<Self>,
@@ -44,7 +45,7 @@ pub trait ConvNormBackend: SparseConvBackend + BatchNormBackend {
 
     /// `relu((conv(x) − mean)·γ/√(var + ε) + β + residual)`.
     #[allow(clippy::too_many_arguments)]
-    #[fusion(dtype = features, shape = Shape::new([map.n_out(), weight[2]]))]
+    #[fusion(dtype = features, shape = burn::tensor::Shape::new([map.n_out(), weight[2]]))]
     fn sparse_conv_norm_add_relu(
         features: FloatTensor<Self>,
         weight: FloatTensor<Self>,
@@ -90,6 +91,7 @@ impl<B: HostFloats> ConvNormBackend for B {
 }
 
 /// The conv's kernels, then the norm's (the trait's default bodies).
+#[cfg(feature = "wgpu")]
 impl ConvNormBackend for CubeBackend {}
 
 /// The default bodies: the conv op and the norm op, each with its own backward.
