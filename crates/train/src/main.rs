@@ -153,6 +153,10 @@ enum Cmd {
         /// Stop each run after this many epochs.
         #[arg(long)]
         max_epochs: Option<usize>,
+        /// Run only this variant's seeds (repeatable; default: every variant). The tables
+        /// still list every finished run of the sweep.
+        #[arg(long = "variant", value_name = "NAME")]
+        variants: Vec<String>,
         /// Only print the runs the sweep would make.
         #[arg(long)]
         dry_run: bool,
@@ -312,7 +316,7 @@ fn main() -> ExitCode {
             };
             train::serve::serve(&opts)
         })(),
-        Some(Cmd::Sweep { file, backend, max_steps, max_epochs, dry_run, rescore }) => (|| -> Result<()> {
+        Some(Cmd::Sweep { file, backend, max_steps, max_epochs, variants, dry_run, rescore }) => (|| -> Result<()> {
             let (sweep, base) = SweepConfig::load(&file)?;
             let mut jobs = sweep.jobs(&base)?;
             if let Some(b) = backend {
@@ -324,7 +328,7 @@ fn main() -> ExitCode {
             }
             pin(b);
             if dry_run {
-                for j in &jobs {
+                for j in jobs.iter().filter(|j| variants.is_empty() || variants.contains(&j.variant)) {
                     println!("{} seed {} → {}", j.variant, j.seed, j.dir.display());
                 }
                 return Ok(());
@@ -350,6 +354,7 @@ fn main() -> ExitCode {
             let results = train::run_sweep(
                 &sweep,
                 &jobs,
+                &variants,
                 |job| {
                     let existing = if job.dir.join("config.toml").exists() { Existing::Resume } else { Existing::Refuse };
                     job.config.backend.device()?;

@@ -208,15 +208,25 @@ pub fn rescore(job: &Job, verbose: bool) -> Result<Option<TrainSummary>> {
 }
 
 /// Runs every job not finished yet with `run_job` (which trains into `job.dir`, resuming what is
-/// there). The results are written before the first job and after each one, so a sweep stopped
-/// after hours still has the tables of the runs it finished. A failed job is reported and the
-/// others still run.
-pub fn run_sweep(sweep: &SweepConfig, jobs: &[Job], mut run_job: impl FnMut(&Job) -> Result<TrainSummary>, verbose: bool) -> Result<SweepResults> {
+/// there), or, with `variants` not empty, only those variants' jobs (the tables still cover every
+/// finished run of the sweep: a long sweep can be run a variant at a time, in any order). The
+/// results are written before the first job and after each one, so a sweep stopped after hours
+/// still has the tables of the runs it finished. A failed job is reported and the others still
+/// run.
+pub fn run_sweep(sweep: &SweepConfig, jobs: &[Job], variants: &[String], mut run_job: impl FnMut(&Job) -> Result<TrainSummary>, verbose: bool) -> Result<SweepResults> {
+    if let Some(unknown) = variants.iter().find(|v| !jobs.iter().any(|j| &j.variant == *v)) {
+        let mut names: Vec<&str> = jobs.iter().map(|j| j.variant.as_str()).collect();
+        names.dedup();
+        bail!("the sweep has no variant '{unknown}' (it has: {})", names.join(", "));
+    }
     std::fs::create_dir_all(sweep.dir())?;
     let mut results = aggregate(jobs);
     results.write(&sweep.dir())?;
     let mut failures = Vec::new();
     for (i, job) in jobs.iter().enumerate() {
+        if !variants.is_empty() && !variants.contains(&job.variant) {
+            continue;
+        }
         if finished(&job.dir).is_some() {
             if verbose {
                 eprintln!("[{}/{}] {} seed {}: finished before, skipped", i + 1, jobs.len(), job.variant, job.seed);

@@ -143,6 +143,7 @@ fn sweep_skips_finished_runs_and_aggregates_seeds() {
     let results = run_sweep(
         &sweep,
         &jobs,
+        &[],
         |j| {
             ran.push((j.variant.clone(), j.seed));
             // The tables are written before the first job and after each: at "a" seed 1, seed 0
@@ -171,8 +172,22 @@ fn sweep_skips_finished_runs_and_aggregates_seeds() {
     assert!(md.contains("| a | person_minkunet | 2/2 | 50.0 ± 14.1 [-77.1, 177.1] |"), "{md}");
     assert!(sweep.dir().join("results.csv").exists() && sweep.dir().join("curves.png").exists());
     // A re-run has nothing left to do.
-    let again = run_sweep(&sweep, &jobs, |_| panic!("every run is finished"), false).unwrap();
+    let again = run_sweep(&sweep, &jobs, &[], |_| panic!("every run is finished"), false).unwrap();
     assert_eq!(again, results);
     assert!(jobs.iter().all(|j| finished(&j.dir).is_some()));
     assert_eq!(aggregate(&jobs), results);
+    // One variant at a time: with "a" seed 0 unfinished again, running "b" leaves it alone (and
+    // the tables still list "a"'s finished seed), running "a" runs that seed only.
+    fake_summary(&jobs[0].dir, 0.0, false);
+    let only_b = run_sweep(&sweep, &jobs, &["b".into()], |_| panic!("b is finished"), false).unwrap();
+    assert_eq!((only_b.variants[0].done, only_b.variants[1].done), (1, 2));
+    let mut ran = Vec::new();
+    run_sweep(&sweep, &jobs, &["a".into()], |j| {
+        ran.push((j.variant.clone(), j.seed));
+        Ok(fake_summary(&j.dir, 0.4, true))
+    }, false)
+    .unwrap();
+    assert_eq!(ran, vec![("a".into(), 0)]);
+    let unknown = run_sweep(&sweep, &jobs, &["c".into()], |_| panic!("nothing runs"), false).unwrap_err();
+    assert!(format!("{unknown}").contains("no variant 'c' (it has: a, b)"), "{unknown}");
 }
