@@ -260,19 +260,42 @@ pub fn mean_std(xs: &[f64]) -> (f64, f64) {
     (m, s)
 }
 
-/// Half-width of the two-sided 95 % confidence interval of the mean of `n` values with sample
-/// standard deviation `std` (Student's t with n − 1 degrees of freedom); NaN below 2 values.
-pub fn ci95_half_width(n: usize, std: f64) -> f64 {
-    // t_{0.975, df} for df = 1..=30; beyond, the normal 1.96 is within 2 %.
+/// `t_{0.975, df}` for `df ≥ 1` degrees of freedom, rounded down to a whole number (a
+/// fractional df, as Welch's, gets the wider interval of the df below it).
+fn t975(df: f64) -> f64 {
+    // df = 1..=30; beyond, the normal 1.96 is within 2 %.
     const T: [f64; 30] = [
         12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228, 2.201, 2.179, 2.160, 2.145, 2.131, 2.120, 2.110, 2.101, 2.093, 2.086,
         2.080, 2.074, 2.069, 2.064, 2.060, 2.056, 2.052, 2.048, 2.045, 2.042,
     ];
+    T.get((df.floor().max(1.0) as usize) - 1).copied().unwrap_or(1.96)
+}
+
+/// Half-width of the two-sided 95 % confidence interval of the mean of `n` values with sample
+/// standard deviation `std` (Student's t with n − 1 degrees of freedom); NaN below 2 values.
+pub fn ci95_half_width(n: usize, std: f64) -> f64 {
     if n < 2 {
         return f64::NAN;
     }
-    let t = T.get(n - 2).copied().unwrap_or(1.96);
-    t * std / (n as f64).sqrt()
+    t975((n - 1) as f64) * std / (n as f64).sqrt()
+}
+
+/// The difference of two means, `mean(a) − mean(b)`, and the half-width of its two-sided 95 %
+/// interval by Welch's t (unequal variances, Welch–Satterthwaite degrees of freedom rounded
+/// down): whether one variant ranks above another beyond the seeds' spread. NaN half-width below
+/// 2 values on either side.
+pub fn welch_ci95(a: &[f64], b: &[f64]) -> (f64, f64) {
+    let ((ma, sa), (mb, sb)) = (mean_std(a), mean_std(b));
+    if a.len() < 2 || b.len() < 2 {
+        return (ma - mb, f64::NAN);
+    }
+    let (va, vb) = (sa * sa / a.len() as f64, sb * sb / b.len() as f64);
+    let se2 = va + vb;
+    if se2 == 0.0 {
+        return (ma - mb, 0.0);
+    }
+    let df = se2 * se2 / (va * va / (a.len() - 1) as f64 + vb * vb / (b.len() - 1) as f64);
+    (ma - mb, t975(df) * se2.sqrt())
 }
 
 /// One variant's aggregate over its finished seeds.
@@ -290,6 +313,8 @@ pub struct VariantResult {
     pub ap3d: [(f64, f64); 3],
     /// Half-width of the 95 % interval of each AP3D mean (NaN below 2 seeds).
     pub ap3d_ci95: [f64; 3],
+    /// AP3D at 0.3/0.5/0.7 of each finished seed, in seed order.
+    pub ap3d_seeds: [Vec<f64>; 3],
     /// AP3D@0.3 per range band (`validate::RANGE_BANDS`), mean over the seeds that report it.
     pub ap3d_03_by_range: Option<[f64; 3]>,
     /// Median heading error of matched boxes (degrees), mean over the seeds that report it.
@@ -300,6 +325,14 @@ pub struct VariantResult {
     pub params: usize,
     /// Validation AP3D@0.3 per epoch, averaged over finished seeds: (epoch, mean).
     pub curve: Vec<(f64, f64)>,
+}
+
+impl VariantResult {
+    /// This variant's AP3D mean at threshold `i` minus `other`'s, and the half-width of the
+    /// difference's 95 % interval ([`welch_ci95`]).
+    pub fn difference(&self, other: &VariantResult, i: usize) -> (f64, f64) {
+        welch_ci95(&self.ap3d_seeds[i], &other.ap3d_seeds[i])
+    }
 }
 
 /// All variants' results.
@@ -345,6 +378,7 @@ pub fn aggregate(jobs: &[Job]) -> SweepResults {
                 planned: mine.len(),
                 ap3d,
                 ap3d_ci95,
+                ap3d_seeds: ap_values,
                 ap3d_03_by_range,
                 heading_deg,
                 train_seconds: mean_std(&done.iter().map(|(s, _)| s.train_seconds).collect::<Vec<_>>()),
@@ -363,6 +397,7 @@ impl SweepResults {
         w.write_record([
             "variant", "model", "seeds_done", "seeds", "ap3d_0.3_mean", "ap3d_0.3_std", "ap3d_0.3_ci95", "ap3d_0.5_mean", "ap3d_0.5_std", "ap3d_0.5_ci95", "ap3d_0.7_mean",
             "ap3d_0.7_std", "ap3d_0.7_ci95", "ap3d_0.3_0-10m", "ap3d_0.3_10-20m", "ap3d_0.3_20-25m", "heading_error_deg", "train_seconds_mean", "train_seconds_std", "params",
+            "d_ap3d_0.3_vs_first", "d_ap3d_0.3_ci95", "d_ap3d_0.5_vs_first", "d_ap3d_0.5_ci95", "d_ap3d_0.7_vs_first", "d_ap3d_0.7_ci95",
         ])?;
         let opt = |x: Option<f64>| x.map_or_else(String::new, |v| format!("{v}"));
         for v in &self.variants {
@@ -373,6 +408,10 @@ impl SweepResults {
             row.extend((0..3).map(|b| opt(v.ap3d_03_by_range.map(|r| r[b]))));
             row.push(opt(v.heading_deg));
             row.extend([format!("{}", v.train_seconds.0), format!("{}", v.train_seconds.1), v.params.to_string()]);
+            for i in 0..3 {
+                let (d, h) = v.difference(&self.variants[0], i);
+                row.extend([format!("{d}"), format!("{h}")]);
+            }
             w.write_record(&row)?;
         }
         Ok(String::from_utf8(w.into_inner().map_err(|e| anyhow::anyhow!("{e}"))?)?)
@@ -398,6 +437,29 @@ impl SweepResults {
             let heading = v.heading_deg.map_or_else(|| "–".to_string(), |h| format!("{h:.0}°"));
             let t = if v.done == 0 { "–".to_string() } else { format!("{:.0} ± {:.0} s", v.train_seconds.0, v.train_seconds.1) };
             s.push_str(&format!("| {} | {} | {}/{} | {} | {} | {} | {bands} | {heading} | {} | {} |\n", v.variant, v.model, v.done, v.planned, ap(0), ap(1), ap(2), t, v.params));
+        }
+        if let [first, rest @ ..] = self.variants.as_slice()
+            && !rest.is_empty()
+        {
+            s.push_str(&format!(
+                "\nAgainst `{}`: difference of the means in AP3D points, with its 95 % interval (Welch's t) where both have at least 2 seeds; * where the interval excludes 0.\n\n| variant | Δ AP3D@0.3 | Δ AP3D@0.5 | Δ AP3D@0.7 |\n|---|---|---|---|\n",
+                first.variant
+            ));
+            for v in rest {
+                let d = |i: usize| {
+                    if v.done == 0 || first.done == 0 {
+                        return "–".to_string();
+                    }
+                    let (d, h) = v.difference(first, i);
+                    if h.is_finite() {
+                        let star = if (d - h) * (d + h) > 0.0 { " *" } else { "" };
+                        format!("{:+.1} [{:+.1}, {:+.1}]{star}", 100.0 * d, 100.0 * (d - h), 100.0 * (d + h))
+                    } else {
+                        format!("{:+.1}", 100.0 * d)
+                    }
+                };
+                s.push_str(&format!("| {} | {} | {} | {} |\n", v.variant, d(0), d(1), d(2)));
+            }
         }
         s
     }
@@ -433,6 +495,21 @@ mod tests {
         assert!((ci95_half_width(3, 1.0) - 4.303 / 3f64.sqrt()).abs() < 1e-12);
         assert!(ci95_half_width(1, 1.0).is_nan());
         assert!((ci95_half_width(100, 2.0) - 1.96 * 0.2).abs() < 1e-12);
+    }
+
+    #[test]
+    fn welch_interval_of_a_difference() {
+        // Hand-derived: both std 1, n = 3: se² = 1/3 + 1/3, df = (2/3)² / (2 · (1/3)² / 2) = 4,
+        // t_{0.975, 4} = 2.776.
+        let (d, h) = welch_ci95(&[1.0, 2.0, 3.0], &[4.0, 5.0, 6.0]);
+        assert!((d + 3.0).abs() < 1e-12 && (h - 2.776 * (2.0f64 / 3.0).sqrt()).abs() < 1e-12, "{d} {h}");
+        // Unequal variances: a's std 1 (n = 3), b's std 3 (n = 2): va = 1/3, vb = 4.5,
+        // df = (29/6)² / ((1/3)²/2 + 4.5²) = 1.15, rounded down to 1: t = 12.706.
+        let (d, h) = welch_ci95(&[1.0, 2.0, 3.0], &[0.0, 4.2426406871192848]);
+        let se = (1.0f64 / 3.0 + 4.5).sqrt();
+        assert!((d - (2.0 - 2.1213203435596424)).abs() < 1e-12 && (h - 12.706 * se).abs() < 1e-9, "{d} {h}");
+        assert!(welch_ci95(&[1.0], &[2.0, 3.0]).1.is_nan());
+        assert_eq!(welch_ci95(&[1.0, 1.0], &[2.0, 2.0]), (-1.0, 0.0));
     }
 
     #[test]
