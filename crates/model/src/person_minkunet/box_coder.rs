@@ -4,7 +4,8 @@
 //!
 //! Head channel layout (`2·bins + 7` channels): `[0]` cls logit, `[1..4]` centre offset (m),
 //! `[4..7]` `log(l/l̄), log(w/w̄), log(h/h̄)`, `[7..7+bins]` bin logits, `[7+bins..7+2·bins]` bin
-//! residuals (radians, not normalised).
+//! residuals (radians, not normalised). With [`HeadingEncoding::SinCos`] (9 channels), `[7]` and
+//! `[8]` are the heading's sine and cosine instead.
 
 use std::f64::consts::{PI, TAU};
 
@@ -45,6 +46,23 @@ pub enum BoxFrame {
     Ray,
 }
 
+/// How the head encodes the heading.
+///
+/// The authors classify 12 bins and regress a residual in each: a person seen from the front and
+/// from the back look alike, so a voxel that cannot tell splits its bins between the two, and the
+/// arg-max picks one at random. A sine and cosine regressed directly (CenterPoint's encoding)
+/// average the two guesses instead: the vector shrinks, and whatever cue of the front there is
+/// sets its direction.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum HeadingEncoding {
+    /// `num_bins` bin logits and a residual per bin (the authors').
+    #[default]
+    Bins,
+    /// sin θ and cos θ, regressed with an MSE; decoded as `atan2(sin, cos)`.
+    SinCos,
+}
+
 /// A box encoded against one voxel centre: the regression targets of spec §1.9.
 #[derive(Debug, Clone, PartialEq)]
 pub struct EncodedBox {
@@ -56,6 +74,8 @@ pub struct EncodedBox {
     pub bin: usize,
     /// `wrap(θ − (j + ½)·bin)` for every bin j (θ in the coder's frame).
     pub residuals: Vec<f64>,
+    /// The heading θ in the coder's frame (what [`HeadingEncoding::SinCos`] regresses).
+    pub theta: f64,
 }
 
 /// Encodes and decodes boxes; `decode(encode(b)) = b` with the heading wrapped into (−π, π].
@@ -67,6 +87,8 @@ pub struct BoxCoder {
     pub num_bins: usize,
     /// The frame of the offsets and the heading.
     pub frame: BoxFrame,
+    /// Bins and residuals, or sine and cosine.
+    pub heading: HeadingEncoding,
 }
 
 /// The cosine and sine of the azimuth of `v` in the ray frame; `None` in the base frame (and at
@@ -81,7 +103,7 @@ impl BoxCoder {
     pub fn new(mean_size: [f64; 3], num_bins: usize) -> Self {
         assert!(num_bins > 0, "at least one rotation bin");
         assert!(mean_size.iter().all(|&m| m > 0.0), "mean size must be positive, got {mean_size:?}");
-        Self { mean_size, num_bins, frame: BoxFrame::Base }
+        Self { mean_size, num_bins, frame: BoxFrame::Base, heading: HeadingEncoding::Bins }
     }
 
     /// The same coder in `frame`.
@@ -89,9 +111,18 @@ impl BoxCoder {
         Self { frame, ..self }
     }
 
-    /// Head channels: cls + offset + log-dims + bin logits + residuals = `2·bins + 7`.
+    /// The same coder with the heading encoded as `heading`.
+    pub fn with_heading(self, heading: HeadingEncoding) -> Self {
+        Self { heading, ..self }
+    }
+
+    /// Head channels: cls + offset + log-dims + bin logits + residuals = `2·bins + 7`, or
+    /// cls + offset + log-dims + sin + cos = 9.
     pub fn channels(&self) -> usize {
-        2 * self.num_bins + 7
+        match self.heading {
+            HeadingEncoding::Bins => 2 * self.num_bins + 7,
+            HeadingEncoding::SinCos => 9,
+        }
     }
 
     /// Width of one rotation bin, radians.
@@ -122,6 +153,7 @@ impl BoxCoder {
             log_dims: [0, 1, 2].map(|k| (dims[k] / self.mean_size[k]).ln()),
             bin: self.bin_of(theta),
             residuals: (0..self.num_bins).map(|j| wrap_angle(theta - self.bin_centre(j))).collect(),
+            theta,
         }
     }
 
@@ -133,22 +165,32 @@ impl BoxCoder {
 
     /// Decodes an encoding back into a box.
     pub fn decode(&self, e: &EncodedBox, v: [f64; 3]) -> Box3d {
-        self.decode_parts(v, e.offset, e.log_dims, e.bin, e.residuals[e.bin])
+        let theta = match self.heading {
+            HeadingEncoding::Bins => self.decode_heading(e.bin, e.residuals[e.bin]),
+            HeadingEncoding::SinCos => wrap_angle(e.theta),
+        };
+        self.decode_parts(v, e.offset, e.log_dims, theta)
     }
 
-    /// Decodes one voxel's head output (`channels()` values): the arg-max bin and its residual.
+    /// Decodes one voxel's head output (`channels()` values): the arg-max bin and its residual,
+    /// or `atan2(sin, cos)`.
     pub fn decode_row(&self, row: &[f32], v: [f64; 3]) -> Box3d {
-        let bins = &row[BINS..BINS + self.num_bins];
-        let k = (0..self.num_bins).fold(0, |best, j| if bins[j] > bins[best] { j } else { best });
         let f = |i: usize| row[i] as f64;
+        let theta = match self.heading {
+            HeadingEncoding::Bins => {
+                let bins = &row[BINS..BINS + self.num_bins];
+                let k = (0..self.num_bins).fold(0, |best, j| if bins[j] > bins[best] { j } else { best });
+                self.decode_heading(k, f(BINS + self.num_bins + k))
+            }
+            HeadingEncoding::SinCos => f(BINS).atan2(f(BINS + 1)),
+        };
         let offset = [f(OFFSET), f(OFFSET + 1), f(OFFSET + 2)];
         let log_dims = [f(LOG_DIMS), f(LOG_DIMS + 1), f(LOG_DIMS + 2)];
-        self.decode_parts(v, offset, log_dims, k, f(BINS + self.num_bins + k))
+        self.decode_parts(v, offset, log_dims, theta)
     }
 
-    fn decode_parts(&self, v: [f64; 3], offset: [f64; 3], log_dims: [f64; 3], bin: usize, residual: f64) -> Box3d {
+    fn decode_parts(&self, v: [f64; 3], offset: [f64; 3], log_dims: [f64; 3], theta: f64) -> Box3d {
         let [l, w, h] = [0, 1, 2].map(|k| self.mean_size[k] * log_dims[k].exp());
-        let theta = self.decode_heading(bin, residual);
         let ([dx, dy, dz], rot_z) = match turn(self.frame, v) {
             Some((c, s)) => ([c * offset[0] - s * offset[1], s * offset[0] + c * offset[1], offset[2]], wrap_angle(theta + s.atan2(c))),
             None => (offset, theta),
@@ -166,6 +208,7 @@ mod tests {
     fn encode_decode_round_trip_is_exact() {
         for frame in [BoxFrame::Base, BoxFrame::Ray] {
             round_trip(BoxCoder::new([0.9, 0.5, 1.7], 12).in_frame(frame));
+            round_trip(BoxCoder::new([0.9, 0.5, 1.7], 12).in_frame(frame).with_heading(HeadingEncoding::SinCos));
         }
     }
 
@@ -199,7 +242,7 @@ mod tests {
     }
 
     fn round_trip(coder: BoxCoder) {
-        assert_eq!(coder.channels(), 31);
+        assert_eq!(coder.channels(), if coder.heading == HeadingEncoding::Bins { 31 } else { 9 });
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
         let mut headings: Vec<f64> = (0..500).map(|_| rng.random_range(-10.0..10.0)).collect();
         // Bin edges, ±π and 0 are where an off-by-one would show.
@@ -222,9 +265,18 @@ mod tests {
             let mut row = vec![0f32; coder.channels()];
             row[OFFSET..OFFSET + 3].copy_from_slice(&e.offset.map(|x| x as f32));
             row[LOG_DIMS..LOG_DIMS + 3].copy_from_slice(&e.log_dims.map(|x| x as f32));
-            row[BINS + e.bin] = 5.0;
-            for (j, r) in e.residuals.iter().enumerate() {
-                row[BINS + 12 + j] = *r as f32;
+            match coder.heading {
+                HeadingEncoding::Bins => {
+                    row[BINS + e.bin] = 5.0;
+                    for (j, r) in e.residuals.iter().enumerate() {
+                        row[BINS + 12 + j] = *r as f32;
+                    }
+                }
+                // Any positive multiple of (sin, cos) is the same heading.
+                HeadingEncoding::SinCos => {
+                    row[BINS] = (0.4 * e.theta.sin()) as f32;
+                    row[BINS + 1] = (0.4 * e.theta.cos()) as f32;
+                }
             }
             let r = coder.decode_row(&row, v);
             assert!((r.cx - b.cx).abs() < 1e-5 && (r.l - b.l).abs() < 1e-5);

@@ -5,7 +5,7 @@ use sparse_conv::burn::tensor::Device;
 
 use super::PersonMinkUNet;
 use super::backbone::MinkUNetConfig;
-use super::box_coder::BoxFrame;
+use super::box_coder::{BoxFrame, HeadingEncoding};
 use crate::post::PostProcessConfig;
 
 /// Which soft classification target (spec §1.9).
@@ -56,6 +56,9 @@ pub struct PersonMinkUNetConfig {
     pub width: f64,
     /// Rotation bins (12).
     pub num_bins: usize,
+    /// The heading as bins with residuals (`"bins"`, the authors') or as a sine and cosine
+    /// (`"sin_cos"`, weighted by `sin_cos_weight`; `num_bins` and the bin weights then unused).
+    pub heading: HeadingEncoding,
     /// Mean person size (l, w, h) the log-dimensions are relative to (0.9, 0.5, 1.7).
     pub mean_size: [f64; 3],
     /// The frame of the centre offsets and the heading: `"base"` (the authors') or `"ray"`
@@ -75,6 +78,8 @@ pub struct PersonMinkUNetConfig {
     pub bin_weight: f64,
     /// Weight of the residual MSE (0.01 = 0.1 × 0.1).
     pub residual_weight: f64,
+    /// Weight of the sin/cos MSE with `heading = "sin_cos"` (1).
+    pub sin_cos_weight: f64,
     /// Post-processing of the per-voxel boxes.
     pub post: PostProcessConfig,
 }
@@ -87,6 +92,7 @@ impl Default for PersonMinkUNetConfig {
             channels: vec![32, 32, 64, 128, 256, 256, 128, 96, 96],
             width: 1.0,
             num_bins: 12,
+            heading: HeadingEncoding::Bins,
             mean_size: [0.9, 0.5, 1.7],
             box_frame: BoxFrame::Base,
             epsilon: 0.2,
@@ -96,6 +102,7 @@ impl Default for PersonMinkUNetConfig {
             dims_weight: 1.0,
             bin_weight: 0.1,
             residual_weight: 0.01,
+            sin_cos_weight: 1.0,
             post: PostProcessConfig::default(),
         }
     }

@@ -1,10 +1,11 @@
 //! Person-MinkUNet's loss (spec §1.10): soft-target BCE over all voxels, and on foreground voxels
-//! centre MSE, log-dimension MSE, bin cross-entropy and residual MSE, each reported on its own.
+//! centre MSE, log-dimension MSE, bin cross-entropy and residual MSE (or, with the heading as a
+//! sine and cosine, their MSE), each reported on its own.
 
 use sparse_conv::burn::tensor::activation::{log_sigmoid, log_softmax, relu};
 use sparse_conv::burn::tensor::{Device, Int, Tensor, TensorData};
 
-use super::box_coder::{BINS, CLS, LOG_DIMS, OFFSET};
+use super::box_coder::{BINS, CLS, HeadingEncoding, LOG_DIMS, OFFSET};
 use crate::detector::LossTerms;
 use super::targets::VoxelTargets;
 
@@ -21,16 +22,20 @@ pub struct LossWeights {
     pub bin: f64,
     /// Residual MSE (all bins) on foreground voxels.
     pub residual: f64,
+    /// sin/cos MSE on foreground voxels ([`HeadingEncoding::SinCos`] only).
+    pub sin_cos: f64,
 }
 
 impl Default for LossWeights {
     fn default() -> Self {
-        Self { cls: 100.0, loc: 1.0, dims: 1.0, bin: 0.1, residual: 0.01 }
+        Self { cls: 100.0, loc: 1.0, dims: 1.0, bin: 0.1, residual: 0.01, sin_cos: 1.0 }
     }
 }
 
-/// Names of the terms, in the order [`loss`] reports them.
+/// Names of the terms, in the order [`loss`] reports them (bins).
 pub const TERMS: [&str; 5] = ["cls", "loc", "dims", "bin", "residual"];
+/// Names of the terms with the heading as a sine and cosine.
+pub const TERMS_SIN_COS: [&str; 4] = ["cls", "loc", "dims", "heading"];
 
 /// BCE with logits against a soft target, element-wise and stable for any logit:
 /// `max(x, 0) − x·t + log(1 + e^{−|x|})`.
@@ -43,34 +48,53 @@ fn floats<const D: usize>(v: &[f32], shape: [usize; D], device: &Device) -> Tens
     Tensor::from_data(TensorData::new(v.to_vec(), shape), device)
 }
 
-/// The weighted terms and their sum for head output `out` (`[M, 2·bins + 7]`) and `targets`.
+/// The weighted terms and their sum for head output `out` (`[M, 2·bins + 7]`, or `[M, 9]` with
+/// `heading` = sin/cos) and `targets`: [`TERMS`] or [`TERMS_SIN_COS`].
 ///
-/// A batch without foreground voxels gives zero for the four foreground terms (finite loss).
-pub fn loss(out: Tensor<2>, targets: &VoxelTargets, num_bins: usize, w: &LossWeights, device: &Device) -> LossTerms {
+/// A batch without foreground voxels gives zero for the foreground terms (finite loss).
+pub fn loss(out: Tensor<2>, targets: &VoxelTargets, num_bins: usize, heading: HeadingEncoding, w: &LossWeights, device: &Device) -> LossTerms {
     let [m, c] = out.dims();
-    assert_eq!(c, 2 * num_bins + 7, "head output has {c} channels, the layout needs {}", 2 * num_bins + 7);
+    let want = match heading {
+        HeadingEncoding::Bins => 2 * num_bins + 7,
+        HeadingEncoding::SinCos => 9,
+    };
+    assert_eq!(c, want, "head output has {c} channels, the layout needs {want}");
     assert_eq!(targets.cls.len(), m, "one classification target per voxel");
     let logits = out.clone().slice([0..m, CLS..CLS + 1]).reshape([m]);
     let t_cls = floats(&targets.cls, [m], device);
     let cls = bce_with_logits(logits, t_cls).mean() * w.cls;
+    let names: &[&'static str] = match heading {
+        HeadingEncoding::Bins => &TERMS,
+        HeadingEncoding::SinCos => &TERMS_SIN_COS,
+    };
     let f = targets.fg.len();
-    let [loc, dims, bin, residual] = if f == 0 {
-        [0; 4].map(|_| Tensor::<1>::zeros([1], device))
+    let foreground: Vec<Tensor<1>> = if f == 0 {
+        names[1..].iter().map(|_| Tensor::<1>::zeros([1], device)).collect()
     } else {
         let idx: Vec<i64> = targets.fg.iter().map(|&r| r as i64).collect();
         let rows = out.select(0, Tensor::<1, Int>::from_data(TensorData::new(idx, [f]), device));
         let mse = |a: Tensor<2>, b: Tensor<2>| (a - b).powi_scalar(2).mean();
         let loc = mse(rows.clone().slice([0..f, OFFSET..OFFSET + 3]), floats(&targets.offset, [f, 3], device));
         let dims = mse(rows.clone().slice([0..f, LOG_DIMS..LOG_DIMS + 3]), floats(&targets.log_dims, [f, 3], device));
-        let log_p = log_softmax(rows.clone().slice([0..f, BINS..BINS + num_bins]), 1);
-        let k = Tensor::<1, Int>::from_data(TensorData::new(targets.bin.clone(), [f]), device).reshape([f, 1]);
-        let bin = -log_p.gather(1, k).mean();
-        let res_pred = rows.slice([0..f, BINS + num_bins..BINS + 2 * num_bins]);
-        let residual = mse(res_pred, floats(&targets.residuals, [f, num_bins], device));
-        [loc * w.loc, dims * w.dims, bin * w.bin, residual * w.residual]
+        let mut terms = vec![loc * w.loc, dims * w.dims];
+        match heading {
+            HeadingEncoding::Bins => {
+                let log_p = log_softmax(rows.clone().slice([0..f, BINS..BINS + num_bins]), 1);
+                let k = Tensor::<1, Int>::from_data(TensorData::new(targets.bin.clone(), [f]), device).reshape([f, 1]);
+                let bin = -log_p.gather(1, k).mean();
+                let res_pred = rows.slice([0..f, BINS + num_bins..BINS + 2 * num_bins]);
+                let residual = mse(res_pred, floats(&targets.residuals, [f, num_bins], device));
+                terms.extend([bin * w.bin, residual * w.residual]);
+            }
+            HeadingEncoding::SinCos => {
+                let sin_cos = mse(rows.slice([0..f, BINS..BINS + 2]), floats(&targets.sin_cos, [f, 2], device));
+                terms.push(sin_cos * w.sin_cos);
+            }
+        }
+        terms
     };
-    let total = cls.clone() + loc.clone() + dims.clone() + bin.clone() + residual.clone();
-    LossTerms { total, terms: TERMS.into_iter().zip([cls, loc, dims, bin, residual]).collect() }
+    let total = foreground.iter().fold(cls.clone(), |acc, t| acc + t.clone());
+    LossTerms { total, terms: names.iter().copied().zip(std::iter::once(cls).chain(foreground)).collect() }
 }
 
 #[cfg(test)]
@@ -99,9 +123,10 @@ mod tests {
             log_dims: vec![0.1, 0.5, -0.5, 0.0, 0.0, 0.0],
             bin: vec![0, 0],
             residuals: vec![0.2, 0.0, 0.5, -1.0],
+            sin_cos: vec![0.0, 1.0, 1.0, 0.0],
         };
         let w = LossWeights::default();
-        let l = loss(out, &t, bins, &w, &device);
+        let l = loss(out.clone(), &t, bins, HeadingEncoding::Bins, &w, &device);
         let bce = |x: f64, t: f64| -(t * (1.0 / (1.0 + (-x).exp())).ln() + (1.0 - t) * (1.0 / (1.0 + x.exp())).ln());
         let cls = 100.0 * (bce(2.0, 0.7) + bce(-30.0, 0.0) + bce(-1.0, 0.25)) / 3.0;
         let loc = (0.01 + 0.04 + 0.09 + 0.0 + 1.0 + 0.0) / 6.0;
@@ -115,6 +140,15 @@ mod tests {
         }
         assert!((scalar(&l.total) - want.iter().sum::<f64>()).abs() < 1e-3);
         assert_eq!(l.terms.iter().map(|(n, _)| *n).collect::<Vec<_>>(), TERMS);
+
+        // The same rows read as the sin/cos layout (channels 7 and 8 are sin and cos).
+        let l = loss(out.slice([0..3, 0..9]), &t, bins, HeadingEncoding::SinCos, &w, &device);
+        // Row 0 predicts (1, −1) against (0, 1); row 2 (0, 3) against (1, 0).
+        let heading = (1.0 + 4.0 + 1.0 + 9.0) / 4.0;
+        for ((name, got), want) in l.terms.iter().zip([cls, loc, dims, heading]) {
+            assert!((scalar(got) - want).abs() < 1e-4 * want.abs().max(1.0), "{name}: {} vs {want}", scalar(got));
+        }
+        assert_eq!(l.terms.iter().map(|(n, _)| *n).collect::<Vec<_>>(), TERMS_SIN_COS);
     }
 
     #[test]
@@ -122,7 +156,7 @@ mod tests {
         let device = Device::flex().autodiff();
         let out = Tensor::<2>::from_data(TensorData::new(vec![50.0f32; 2 * 31], [2, 31]), &device).require_grad();
         let t = VoxelTargets { cls: vec![0.0, 0.0], ..Default::default() };
-        let l = loss(out.clone(), &t, 12, &LossWeights::default(), &device);
+        let l = loss(out.clone(), &t, 12, HeadingEncoding::Bins, &LossWeights::default(), &device);
         let v = scalar(&l.total);
         assert!(v.is_finite() && (v - 5000.0).abs() < 1e-2, "BCE of logit 50 against 0 is 50, ×100: {v}");
         let grads = l.total.backward();

@@ -15,7 +15,7 @@ pub mod loss;
 pub mod targets;
 
 pub use backbone::{MinkUNet, MinkUNetConfig, UNetLevels};
-pub use box_coder::{BoxCoder, BoxFrame};
+pub use box_coder::{BoxCoder, BoxFrame, HeadingEncoding};
 pub use config::{InputFeatures, PersonMinkUNetConfig, TargetVariant};
 
 use data_jrdb::Batch;
@@ -30,7 +30,7 @@ use decode::decode;
 use loss::{LossWeights, loss};
 use targets::assign;
 
-/// The sparse detector: `M × 3` voxel features → `M × (2·bins + 7)` per-voxel outputs.
+/// The sparse detector: `M × 3` voxel features → `M × (2·bins + 7)` (or `M × 9`) per-voxel outputs.
 #[derive(Module, Debug)]
 pub struct PersonMinkUNet {
     /// Sparse U-Net, features on every input voxel.
@@ -46,23 +46,23 @@ impl PersonMinkUNet {
     /// A model with fresh parameters (spec §1.6 initialisation).
     pub fn new(config: &PersonMinkUNetConfig, device: &Device) -> Self {
         let backbone_cfg = config.backbone();
-        let coder = BoxCoder::new(config.mean_size, config.num_bins);
+        let channels = BoxCoder::new(config.mean_size, config.num_bins).with_heading(config.heading).channels();
         PersonMinkUNet {
             backbone: backbone_cfg.init(device),
-            head: LinearConfig::new(backbone_cfg.out_channels(), coder.channels()).init(device),
+            head: LinearConfig::new(backbone_cfg.out_channels(), channels).init(device),
             config: config.clone(),
         }
     }
 
     /// The box coder of the config.
     pub fn coder(&self) -> BoxCoder {
-        BoxCoder::new(self.config.mean_size, self.config.num_bins).in_frame(self.config.box_frame)
+        BoxCoder::new(self.config.mean_size, self.config.num_bins).in_frame(self.config.box_frame).with_heading(self.config.heading)
     }
 
     /// The loss weights of the config.
     pub fn loss_weights(&self) -> LossWeights {
         let c = &self.config;
-        LossWeights { cls: c.cls_weight, loc: c.loc_weight, dims: c.dims_weight, bin: c.bin_weight, residual: c.residual_weight }
+        LossWeights { cls: c.cls_weight, loc: c.loc_weight, dims: c.dims_weight, bin: c.bin_weight, residual: c.residual_weight, sin_cos: c.sin_cos_weight }
     }
 
     /// The batch's voxels with `features` as a stride-1 sparse tensor on `device`.
@@ -85,7 +85,7 @@ impl PersonMinkUNet {
         SparseTensor::new(features, batch.coords.clone()).expect("a collated batch has unique, in-range voxels")
     }
 
-    /// Head output for every voxel of the batch, `[M, 2·bins + 7]` (layout in [`crate::box_coder`]).
+    /// Head output for every voxel of the batch, `[M, coder().channels()]` (layout in [`box_coder`]).
     pub fn forward(&self, batch: &Batch, device: &Device) -> Tensor<2> {
         let x = self.backbone.forward(Self::input(batch, self.config.input, device));
         per_voxel_linear(&self.head, &x)
@@ -96,7 +96,7 @@ impl Detector for PersonMinkUNet {
     fn loss(&self, batch: &Batch, device: &Device) -> LossTerms {
         let out = self.forward(batch, device);
         let targets = assign(batch, &self.coder(), self.config.epsilon, self.config.target);
-        loss(out, &targets, self.config.num_bins, &self.loss_weights(), device)
+        loss(out, &targets, self.config.num_bins, self.config.heading, &self.loss_weights(), device)
     }
 
     fn head_output(&self, batch: &Batch, device: &Device) -> Vec<f32> {

@@ -21,6 +21,8 @@ pub struct VoxelTargets {
     pub bin: Vec<i64>,
     /// Residuals for every bin of the foreground rows, F×bins.
     pub residuals: Vec<f32>,
+    /// sin θ and cos θ of the foreground rows' headings (the coder's frame), F×2.
+    pub sin_cos: Vec<f32>,
 }
 
 /// `t_c = in · (1 − clamp(d, 0, 1))` for voxel centre `v` and box `b` (spec §1.9): `in` is
@@ -66,6 +68,7 @@ pub fn assign(batch: &Batch, coder: &BoxCoder, epsilon: f64, variant: TargetVari
             t.log_dims.extend(e.log_dims.map(|x| x as f32));
             t.bin.push(e.bin as i64);
             t.residuals.extend(e.residuals.iter().map(|&x| x as f32));
+            t.sin_cos.extend([e.theta.sin() as f32, e.theta.cos() as f32]);
         }
     }
     t

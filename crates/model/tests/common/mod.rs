@@ -85,6 +85,24 @@ pub fn valid_gt(batch: &Batch) -> usize {
         .sum()
 }
 
+/// For every GT box with at least 10 points, the heading error (degrees, over 360°) of the
+/// nearest detection (BEV centres) within 0.3 m; sorted.
+pub fn heading_errors(batch: &Batch, dets: &[Detections]) -> Vec<f64> {
+    let mut errors = Vec::new();
+    for s in 0..batch.len() {
+        let pts: Vec<[f32; 3]> = batch.points(s);
+        for g in batch.boxes[s].iter().filter(|b| b.count_inside(&pts) >= 10) {
+            let near = dets[s].boxes.iter().map(|d| ((d.cx - g.cx).hypot(d.cy - g.cy), d)).filter(|(r, _)| *r < 0.3);
+            if let Some((_, d)) = near.min_by(|a, b| a.0.total_cmp(&b.0)) {
+                let diff = (d.rot_z - g.rot_z).rem_euclid(std::f64::consts::TAU);
+                errors.push(diff.min(std::f64::consts::TAU - diff).to_degrees());
+            }
+        }
+    }
+    errors.sort_by(f64::total_cmp);
+    errors
+}
+
 /// Trains `model` on `batch` for `steps` Adam steps at `lr`; returns it and the loss of every step.
 pub fn train<M: Detector>(mut model: M, batch: &Batch, device: &Device, steps: usize, lr: f64) -> (M, Vec<f64>) {
     let mut optim = AdamConfig::new().init();
