@@ -7,7 +7,8 @@
 //! - a run: [`run_dir`] (the folder), [`trainer`] (the loop), [`validate`] (AP3D with `eval`),
 //!   [`checkpoint`] (atomic best/latest, resume), [`metrics`] (CSV), [`plots`] (PNG), [`progress`];
 //! - after a run: [`detector`] ([`RunDetector`]: a run's model on point clouds), [`infer`]
-//!   (detection files, official layout, scores), [`render`] (BEV PNGs);
+//!   (detection files, official layout, scores), [`calibrate`] (the radial shift of
+//!   post-processing, measured on frames not scored), [`render`] (BEV PNGs);
 //! - on the user's own clouds: [`sensor_pose`] (their frame in JRDB's), [`detect`] (files,
 //!   folders, trees → JSON, KITTI txt, PNG), [`serve`] (the same over HTTP);
 //! - many runs: [`sweep`].
@@ -18,6 +19,8 @@
 
 /// Backend choice and threads.
 pub mod backend;
+/// The centres' bias along the sensor's ray, and the shift that corrects it.
+pub mod calibrate;
 /// Atomic checkpoints and the loop state.
 pub mod checkpoint;
 /// The run configuration (TOML).
@@ -54,6 +57,7 @@ pub mod trainer;
 pub mod validate;
 
 pub use backend::BackendKind;
+pub use calibrate::{CalibrateOptions, RadialBias, calibrate};
 pub use checkpoint::{Checkpoints, Slot, TrainState};
 pub use config::RunConfig;
 pub use detect::{BoxRecord, DetectOptions, FrameReport};

@@ -15,7 +15,7 @@ use std::process::ExitCode;
 use anyhow::{Context, Result, bail};
 use clap::{Args, Parser, Subcommand};
 use data_jrdb::Split;
-use train::{BackendKind, DetectOptions, Existing, InferOptions, RunConfig, RunDetector, RunDir, SensorPose, ServeOptions, Slot, SweepConfig, TrainOptions};
+use train::{BackendKind, CalibrateOptions, DetectOptions, Existing, InferOptions, RunConfig, RunDetector, RunDir, SensorPose, ServeOptions, Slot, SweepConfig, TrainOptions};
 
 /// The weights `detect` and `serve` use unless told otherwise (relative to the working directory,
 /// which is the repository's root under `cargo run`).
@@ -78,6 +78,25 @@ enum SlotArg {
     Latest,
 }
 
+impl From<SplitArg> for Split {
+    fn from(s: SplitArg) -> Split {
+        match s {
+            SplitArg::Train => Split::Train,
+            SplitArg::Val => Split::Val,
+            SplitArg::TrainVal => Split::TrainVal,
+        }
+    }
+}
+
+impl From<SlotArg> for Slot {
+    fn from(s: SlotArg) -> Slot {
+        match s {
+            SlotArg::Best => Slot::Best,
+            SlotArg::Latest => Slot::Latest,
+        }
+    }
+}
+
 #[derive(Subcommand)]
 enum Cmd {
     /// Write a run's detections for a split (pmunet JSON + official KITTI layout), score them, draw some.
@@ -109,6 +128,29 @@ enum Cmd {
         /// Write the detections and scores here instead of RUN/detections/SPLIT.
         #[arg(long, value_name = "DIR")]
         out: Option<PathBuf>,
+    },
+    /// Measure how far a run's boxes fall short of people along the sensor's ray (median over
+    /// matched people, on frames the run is not scored on) and, with --write, store the
+    /// correcting `model.post.radial_shift` in the run's config.toml.
+    Calibrate {
+        /// The run folder.
+        #[arg(long)]
+        run: PathBuf,
+        /// Split to measure on (default: the training split; or another tree's, with --data-root).
+        #[arg(long, value_enum, default_value = "train")]
+        split: SplitArg,
+        /// Checkpoint (default: latest).
+        #[arg(long, value_enum)]
+        checkpoint: Option<SlotArg>,
+        /// Backend (overrides the run's).
+        #[arg(long, value_enum)]
+        backend: Option<BackendKind>,
+        /// Measure on this JRDB-format tree instead of the run's own data.
+        #[arg(long, value_name = "DIR")]
+        data_root: Option<PathBuf>,
+        /// Store the shift in RUN/config.toml (default: only print it).
+        #[arg(long)]
+        write: bool,
     },
     /// Detect people in point-cloud files (PCD, KITTI .bin, .npy), folders of them, glob patterns
     /// or JRDB-format trees; write OUT/json/NAME.json, OUT/kitti/NAME.txt and with --render
@@ -193,10 +235,7 @@ struct ModelArgs {
 
 impl ModelArgs {
     fn slot(&self) -> Slot {
-        match self.checkpoint {
-            Some(SlotArg::Best) => Slot::Best,
-            Some(SlotArg::Latest) | None => Slot::Latest,
-        }
+        self.checkpoint.map_or(Slot::Latest, Slot::from)
     }
 
     /// Pins the backend and checks the threshold before anything loads.
@@ -266,18 +305,21 @@ fn main() -> ExitCode {
             let dir = RunDir::at(&run);
             let b = backend.unwrap_or(dir.config()?.backend);
             pin(b);
-            let split = match split {
-                SplitArg::Train => Split::Train,
-                SplitArg::Val => Split::Val,
-                SplitArg::TrainVal => Split::TrainVal,
-            };
-            let checkpoint = checkpoint.map(|c| match c {
-                SlotArg::Best => Slot::Best,
-                SlotArg::Latest => Slot::Latest,
-            });
+            let (split, checkpoint) = (split.into(), checkpoint.map(Slot::from));
             let out = train::infer(&dir, &InferOptions { split, checkpoint, render, backend, verbose: true, data_root, set, out })?;
             println!("{}", out.table);
             println!("{} frames; detections and scores in {}", out.frames, out.dir.display());
+            Ok(())
+        })(),
+        Some(Cmd::Calibrate { run, split, checkpoint, backend, data_root, write }) => (|| -> Result<()> {
+            let dir = RunDir::at(&run);
+            pin(backend.unwrap_or(dir.config()?.backend));
+            let (split, checkpoint) = (split.into(), checkpoint.map(Slot::from));
+            let bias = train::calibrate(&dir, &CalibrateOptions { split, checkpoint, backend, data_root, write, verbose: true })?;
+            println!("{bias}");
+            if write {
+                println!("written to {}", dir.config_file().display());
+            }
             Ok(())
         })(),
         Some(Cmd::Detect { paths, model, out, render }) => (|| -> Result<()> {
