@@ -195,8 +195,8 @@ enum Cmd {
         /// Stop each run after this many epochs.
         #[arg(long)]
         max_epochs: Option<usize>,
-        /// Run only this variant's seeds (repeatable; default: every variant). The tables
-        /// still list every finished run of the sweep.
+        /// Run (or with --rescore, rescore) only this variant's seeds (repeatable; default:
+        /// every variant). The tables still list every finished run of the sweep.
         #[arg(long = "variant", value_name = "NAME")]
         variants: Vec<String>,
         /// Only print the runs the sweep would make.
@@ -376,7 +376,8 @@ fn main() -> ExitCode {
                 return Ok(());
             }
             if rescore {
-                for j in &jobs {
+                train::sweep::check_variants(&jobs, &variants)?;
+                for j in jobs.iter().filter(|j| variants.is_empty() || variants.contains(&j.variant)) {
                     eprintln!("rescoring {} seed {} ({})", j.variant, j.seed, j.dir.display());
                     match train::sweep::rescore(j, true)? {
                         None => eprintln!("  not finished, not rescored"),

@@ -197,9 +197,17 @@ pub fn rescore(job: &Job, verbose: bool) -> Result<Option<TrainSummary>> {
             job.dir.display()
         );
     }
+    let before = std::fs::read(run.config_file())?;
     write_atomic(&run.config_file(), job.config.to_toml()?.as_bytes())?;
     let opts = InferOptions { split: job.config.data.val_split, checkpoint: Some(Slot::Latest), render: 0, backend: None, verbose, data_root: None, set: vec![], out: None };
-    let out = infer(&run, &opts)?;
+    // A run that cannot be scored (no checkpoint, say) keeps the settings it was scored with.
+    let out = match infer(&run, &opts) {
+        Ok(out) => out,
+        Err(e) => {
+            write_atomic(&run.config_file(), &before)?;
+            return Err(e.context(format!("{}: not rescored, its config.toml left as it was", job.dir.display())));
+        }
+    };
     summary.last_ap3d = Some(out.ap3d);
     summary.last_ap3d_by_range = Some(out.ap3d_by_range);
     summary.last_heading = out.heading;
@@ -214,11 +222,7 @@ pub fn rescore(job: &Job, verbose: bool) -> Result<Option<TrainSummary>> {
 /// still has the tables of the runs it finished. A failed job is reported and the others still
 /// run.
 pub fn run_sweep(sweep: &SweepConfig, jobs: &[Job], variants: &[String], mut run_job: impl FnMut(&Job) -> Result<TrainSummary>, verbose: bool) -> Result<SweepResults> {
-    if let Some(unknown) = variants.iter().find(|v| !jobs.iter().any(|j| &j.variant == *v)) {
-        let mut names: Vec<&str> = jobs.iter().map(|j| j.variant.as_str()).collect();
-        names.dedup();
-        bail!("the sweep has no variant '{unknown}' (it has: {})", names.join(", "));
-    }
+    check_variants(jobs, variants)?;
     std::fs::create_dir_all(sweep.dir())?;
     let mut results = aggregate(jobs);
     results.write(&sweep.dir())?;
@@ -247,6 +251,16 @@ pub fn run_sweep(sweep: &SweepConfig, jobs: &[Job], variants: &[String], mut run
         bail!("{} of {} runs failed:\n{}", failures.len(), jobs.len(), failures.join("\n"));
     }
     Ok(results)
+}
+
+/// An error listing the sweep's variants if `variants` names one it does not have.
+pub fn check_variants(jobs: &[Job], variants: &[String]) -> Result<()> {
+    if let Some(unknown) = variants.iter().find(|v| !jobs.iter().any(|j| &j.variant == *v)) {
+        let mut names: Vec<&str> = jobs.iter().map(|j| j.variant.as_str()).collect();
+        names.dedup();
+        bail!("the sweep has no variant '{unknown}' (it has: {})", names.join(", "));
+    }
+    Ok(())
 }
 
 /// Mean and sample standard deviation (n − 1; 0 for one value).

@@ -162,4 +162,13 @@ fn sweep_rescore_scores_finished_runs_with_new_post_processing_only() {
     write_sweep("\"model.width\" = 0.25");
     let out = Command::new(env!("CARGO_BIN_EXE_train")).args(["sweep", sweep.to_str().unwrap(), "--rescore"]).output().unwrap();
     assert!(!out.status.success() && String::from_utf8_lossy(&out.stderr).contains("only [model.post] and [eval] may differ"));
+    // A run that cannot be scored (its checkpoints gone) is an error naming it, and keeps the
+    // settings it was scored with.
+    std::fs::remove_dir_all(run.join("checkpoints")).unwrap();
+    let config = std::fs::read_to_string(run.join("config.toml")).unwrap();
+    write_sweep("\"model.post.max_boxes\" = 5");
+    let out = Command::new(env!("CARGO_BIN_EXE_train")).args(["sweep", sweep.to_str().unwrap(), "--rescore", "--variant", "base"]).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("not rescored") && err.contains(&run.display().to_string()), "{err}");
+    assert_eq!(std::fs::read_to_string(run.join("config.toml")).unwrap(), config);
 }
