@@ -182,7 +182,8 @@ pub fn finished(dir: &Path) -> Option<TrainSummary> {
 /// Scores a finished run again under `job`'s post-processing and evaluation settings, which may
 /// have changed since it trained (they do not change what it learned): its latest checkpoint on
 /// the validation split, as the end of training validates. Every other setting must be the one
-/// it trained with. The run's `config.toml` takes the new settings, its `summary.json` the new
+/// it trained with (its `name` and `out_dir` aside: a run copied in from another sweep is
+/// rescored too). The run's `config.toml` takes the new settings, its `summary.json` the new
 /// scores, its `detections/val/` the detections; the run's own training record is unchanged.
 /// `None` when the run is not finished (nothing is touched).
 pub fn rescore(job: &Job, verbose: bool) -> Result<Option<TrainSummary>> {
@@ -191,6 +192,9 @@ pub fn rescore(job: &Job, verbose: bool) -> Result<Option<TrainSummary>> {
     let mut stored = run.config()?;
     *stored.model.post_mut() = job.config.model.post().clone();
     stored.eval = job.config.eval.clone();
+    // Where the run lives is not what it learned: a run copied in from another sweep (as the
+    // compare sweep's comments suggest) is rescored like its own.
+    (stored.name, stored.out_dir) = (job.config.name.clone(), job.config.out_dir.clone());
     if stored != job.config {
         bail!(
             "{}: only [model.post] and [eval] may differ from the settings the run trained with; retrain it instead",

@@ -162,6 +162,14 @@ fn sweep_rescore_scores_finished_runs_with_new_post_processing_only() {
     write_sweep("\"model.width\" = 0.25");
     let out = Command::new(env!("CARGO_BIN_EXE_train")).args(["sweep", sweep.to_str().unwrap(), "--rescore"]).output().unwrap();
     assert!(!out.status.success() && String::from_utf8_lossy(&out.stderr).contains("only [model.post] and [eval] may differ"));
+    // A run copied into another sweep (another out_dir in its config) is rescored there.
+    let other = tmp.path().join("s2.toml");
+    std::fs::write(&other, std::fs::read_to_string(&sweep).unwrap().replace("\"model.width\" = 0.25", "\"model.post.max_boxes\" = 4")).unwrap();
+    let copy = tmp.path().join("runs/s2/base/seed-0");
+    std::fs::create_dir_all(copy.parent().unwrap()).unwrap();
+    assert!(Command::new("cp").args(["-r", run.to_str().unwrap(), copy.to_str().unwrap()]).status().unwrap().success());
+    train_bin(&["sweep", other.to_str().unwrap(), "--rescore"]);
+    assert!(std::fs::read_to_string(copy.join("config.toml")).unwrap().contains("max_boxes = 4"));
     // A run that cannot be scored (its checkpoints gone) is an error naming it, and keeps the
     // settings it was scored with.
     std::fs::remove_dir_all(run.join("checkpoints")).unwrap();
