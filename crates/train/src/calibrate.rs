@@ -7,15 +7,14 @@
 //! measured per run: the median error along the ray of matched detections, raw (shift 0).
 
 use anyhow::{Result, ensure};
-use data_jrdb::{Box3d, Split};
+use data_jrdb::{Split, stats};
 use eval::Protocol;
 
 use crate::backend::BackendKind;
 use crate::checkpoint::Slot;
-use crate::data::{ensure_dataset, eval_loader};
-use crate::detector::RunDetector;
+use crate::infer::detect_run_split;
 use crate::run_dir::{RunDir, write_atomic};
-use crate::validate::{FrameResult, detect_split};
+use crate::validate::FrameResult;
 
 /// Detections scoring below this are not matched (the confident ones are the ones that count).
 pub const MIN_SCORE: f64 = 0.3;
@@ -83,13 +82,7 @@ impl std::fmt::Display for RadialBias {
 pub fn radial_errors(frames: &[FrameResult], protocol: &Protocol) -> Vec<(f64, f64)> {
     let mut out = Vec::new();
     for f in frames {
-        let valid: Vec<&Box3d> = f
-            .gt
-            .iter()
-            .zip(&f.num_points)
-            .filter(|(b, n)| **n >= protocol.min_points as i64 && protocol.max_range.is_none_or(|r| b.bev_range() <= r))
-            .map(|(b, _)| b)
-            .collect();
+        let valid = f.scored_gt(protocol);
         let mut taken = vec![false; valid.len()];
         // Detections are best first.
         for d in f.detections.iter().take_while(|d| d.score >= MIN_SCORE) {
@@ -114,11 +107,7 @@ pub fn radial_errors(frames: &[FrameResult], protocol: &Protocol) -> Vec<(f64, f
 
 /// The bias of `errors` (from [`radial_errors`]), overall and per band.
 pub fn radial_bias(errors: &[(f64, f64)]) -> Option<RadialBias> {
-    let median = |mut v: Vec<f64>| -> Option<f64> {
-        v.sort_by(f64::total_cmp);
-        let n = v.len();
-        (n > 0).then(|| if n % 2 == 1 { v[n / 2] } else { 0.5 * (v[n / 2 - 1] + v[n / 2]) })
-    };
+    let median = |v: Vec<f64>| (!v.is_empty()).then(|| stats::median(v));
     let all = median(errors.iter().map(|e| e.1).collect())?;
     let bands = BANDS
         .iter()
@@ -137,19 +126,9 @@ pub fn calibrate(run: &RunDir, opts: &CalibrateOptions) -> Result<RadialBias> {
     let stored = run.config()?;
     let mut cfg = stored.clone();
     cfg.model.post_mut().radial_shift = 0.0;
-    if let Some(root) = &opts.data_root {
-        ensure!(root.exists(), "--data-root {}: no such folder", root.display());
-        cfg.data.root = root.clone();
-        cfg.data.simulate = None;
-    }
-    if let Some(b) = opts.backend {
-        cfg.backend = b;
-    }
-    let detector = RunDetector::with_config(&run.root, cfg, opts.checkpoint.unwrap_or(Slot::Latest), None)?;
-    let cfg = detector.config().clone();
-    ensure_dataset(&cfg.data)?;
-    let loader = eval_loader(&cfg, opts.split)?;
-    let frames = detect_split(|b| detector.detect_batch(b), &loader, opts.verbose)?;
+    let slot = opts.checkpoint.unwrap_or(Slot::Latest);
+    let (detector, _, frames) = detect_run_split(run, cfg, opts.data_root.as_deref(), opts.backend, slot, opts.split, opts.verbose)?;
+    let cfg = detector.config();
     let errors = radial_errors(&frames, &cfg.eval.protocol());
     ensure!(
         errors.len() >= MIN_MATCHES,
@@ -170,6 +149,7 @@ pub fn calibrate(run: &RunDir, opts: &CalibrateOptions) -> Result<RadialBias> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use data_jrdb::Box3d;
     use eval::jrdb::Detection;
 
     fn person(x: f64, y: f64) -> Box3d {

@@ -10,10 +10,10 @@
 //! ```
 
 use std::collections::BTreeMap;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Result;
-use data_jrdb::Split;
+use data_jrdb::{Loader, Split};
 use eval::jrdb::{DetectionFile, write_detections};
 use eval::kitti::FileKind;
 use serde_json::json;
@@ -75,23 +75,39 @@ pub fn split_name(split: Split) -> &'static str {
     }
 }
 
-/// Loads the run's model from a checkpoint and writes, scores and draws its detections.
-pub fn infer(run: &RunDir, opts: &InferOptions) -> Result<InferOutput> {
-    let mut cfg = if opts.set.is_empty() { run.config()? } else { RunConfig::load(&run.config_file(), &opts.set)? };
-    if let Some(root) = &opts.data_root {
+/// The run's model (checkpoint `slot`, settings `cfg`) over `split` of `data_root` (default: the
+/// run's own data, simulated on first use), on `backend` (default: the config's): the detector,
+/// the split's loader and every frame's detections.
+pub fn detect_run_split(
+    run: &RunDir,
+    mut cfg: RunConfig,
+    data_root: Option<&Path>,
+    backend: Option<BackendKind>,
+    slot: Slot,
+    split: Split,
+    verbose: bool,
+) -> Result<(RunDetector, Loader, Vec<FrameResult>)> {
+    if let Some(root) = data_root {
         anyhow::ensure!(root.exists(), "--data-root {}: no such folder", root.display());
-        cfg.data.root = root.clone();
+        cfg.data.root = root.to_path_buf();
         cfg.data.simulate = None;
     }
-    if let Some(b) = opts.backend {
+    if let Some(b) = backend {
         cfg.backend = b;
     }
-    let slot = opts.checkpoint.unwrap_or(Slot::Latest);
     let detector = RunDetector::with_config(&run.root, cfg, slot, None)?;
+    ensure_dataset(&detector.config().data)?;
+    let loader = eval_loader(detector.config(), split)?;
+    let frames = detect_split(|b| detector.detect_batch(b), &loader, verbose)?;
+    Ok((detector, loader, frames))
+}
+
+/// Loads the run's model from a checkpoint and writes, scores and draws its detections.
+pub fn infer(run: &RunDir, opts: &InferOptions) -> Result<InferOutput> {
+    let cfg = if opts.set.is_empty() { run.config()? } else { RunConfig::load(&run.config_file(), &opts.set)? };
+    let slot = opts.checkpoint.unwrap_or(Slot::Latest);
+    let (detector, loader, frames) = detect_run_split(run, cfg, opts.data_root.as_deref(), opts.backend, slot, opts.split, opts.verbose)?;
     let cfg = detector.config().clone();
-    ensure_dataset(&cfg.data)?;
-    let loader = eval_loader(&cfg, opts.split)?;
-    let frames = detect_split(|b| detector.detect_batch(b), &loader, opts.verbose)?;
     let dir = opts.out.clone().unwrap_or_else(|| run.detections(split_name(opts.split)));
     let protocol = cfg.eval.protocol();
     let (report, by_range) = write_results(&frames, &dir, &protocol)?;

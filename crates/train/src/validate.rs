@@ -30,6 +30,16 @@ pub struct FrameResult {
 }
 
 impl FrameResult {
+    /// The GT boxes `protocol` scores: enough points, within its range.
+    pub fn scored_gt(&self, protocol: &Protocol) -> Vec<&Box3d> {
+        self.gt
+            .iter()
+            .zip(&self.num_points)
+            .filter(|(b, n)| **n >= protocol.min_points as i64 && protocol.max_range.is_none_or(|r| b.bev_range() <= r))
+            .map(|(b, _)| b)
+            .collect()
+    }
+
     /// The evaluator's frame: GT as the official converter writes it, detections as KITTI lines.
     pub fn to_eval_frame(&self) -> Frame {
         let gt = self
@@ -63,13 +73,7 @@ impl HeadingError {
     pub fn of(frames: &[FrameResult], protocol: &Protocol) -> Option<HeadingError> {
         let mut errors: Vec<f64> = Vec::new();
         for f in frames {
-            let valid: Vec<&Box3d> = f
-                .gt
-                .iter()
-                .zip(&f.num_points)
-                .filter(|(b, n)| **n >= protocol.min_points as i64 && protocol.max_range.is_none_or(|r| b.bev_range() <= r))
-                .map(|(b, _)| b)
-                .collect();
+            let valid = f.scored_gt(protocol);
             let mut taken = vec![false; valid.len()];
             // Detections are best first.
             for d in &f.detections {
