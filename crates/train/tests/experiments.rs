@@ -1,0 +1,58 @@
+//! Every config the repository ships resolves: the run configs in `experiments/`, every variant and
+//! seed of every sweep in `experiments/sweeps/`, and the shipped weights' `config.toml`. A typo in
+//! a key (the configs deny unknown fields) or a value `validate` rejects fails here, not an hour
+//! into someone's run.
+
+use std::path::{Path, PathBuf};
+
+use train::config::RunConfig;
+use train::sweep::SweepConfig;
+
+fn workspace() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+fn tomls(dir: &Path) -> Vec<PathBuf> {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .unwrap_or_else(|e| panic!("reading {}: {e}", dir.display()))
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+        .collect();
+    files.sort();
+    files
+}
+
+#[test]
+fn every_run_config_resolves() {
+    let files = tomls(&workspace().join("experiments"));
+    assert!(files.iter().any(|p| p.ends_with("quickstart.toml")), "the quickstart config is among {files:?}");
+    for path in &files {
+        RunConfig::load(path, &[]).unwrap_or_else(|e| panic!("{}: {e:#}", path.display()));
+    }
+}
+
+#[test]
+fn every_sweep_resolves_every_variant_and_seed() {
+    let files = tomls(&workspace().join("experiments/sweeps"));
+    assert!(files.len() >= 5, "sweeps found: {files:?}");
+    for path in &files {
+        let (sweep, base) = SweepConfig::load(path).unwrap_or_else(|e| panic!("{}: {e:#}", path.display()));
+        let jobs = sweep.jobs(&base).unwrap_or_else(|e| panic!("{}: {e:#}", path.display()));
+        let variants = sweep.variants().unwrap();
+        assert_eq!(jobs.len(), variants.len() * sweep.seeds.len(), "{}: one job per variant and seed", path.display());
+    }
+}
+
+#[test]
+fn the_shipped_weights_configs_resolve() {
+    let weights = workspace().join("weights");
+    let mut found = 0;
+    for entry in std::fs::read_dir(&weights).unwrap() {
+        let config = entry.unwrap().path().join("config.toml");
+        if config.is_file() {
+            RunConfig::load(&config, &[]).unwrap_or_else(|e| panic!("{}: {e:#}", config.display()));
+            found += 1;
+        }
+    }
+    assert!(found >= 2, "Person-MinkUNet's and CenterPoint's weights ship with their configs");
+}
