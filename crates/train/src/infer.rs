@@ -107,7 +107,7 @@ pub fn infer(run: &RunDir, opts: &InferOptions) -> Result<InferOutput> {
     let cfg = if opts.set.is_empty() { run.config()? } else { RunConfig::load(&run.config_file(), &opts.set)? };
     let slot = opts.checkpoint.unwrap_or(Slot::Latest);
     let (detector, loader, frames) = detect_run_split(run, cfg, opts.data_root.as_deref(), opts.backend, slot, opts.split, opts.verbose)?;
-    let cfg = detector.config().clone();
+    let cfg = detector.config();
     let dir = opts.out.clone().unwrap_or_else(|| run.detections(split_name(opts.split)));
     let protocol = cfg.eval.protocol();
     let (report, by_range) = write_results(&frames, &dir, &protocol)?;
