@@ -337,6 +337,8 @@ pub struct VariantResult {
     pub ap3d_03_by_range: Option<[f64; 3]>,
     /// Median heading error of matched boxes (degrees), mean over the seeds that report it.
     pub heading_deg: Option<f64>,
+    /// Share of matched boxes pointing within 90° of the truth, mean over the seeds that report it.
+    pub direction_right: Option<f64>,
     /// Training time, seconds: (mean, std).
     pub train_seconds: (f64, f64),
     /// Parameters.
@@ -380,6 +382,8 @@ pub fn aggregate(jobs: &[Job]) -> SweepResults {
             let ap3d_03_by_range = (!bands.is_empty()).then(|| [0, 1, 2].map(|b| mean_std(&bands.iter().map(|x| x[b][0]).collect::<Vec<_>>()).0));
             let headings: Vec<f64> = done.iter().filter_map(|(s, _)| s.last_heading.map(|h| h.median_deg)).collect();
             let heading_deg = (!headings.is_empty()).then(|| mean_std(&headings).0);
+            let rights: Vec<f64> = done.iter().filter_map(|(s, _)| s.last_heading.and_then(|h| h.direction_right)).collect();
+            let direction_right = (!rights.is_empty()).then(|| mean_std(&rights).0);
             let mut curves: BTreeMap<i64, Vec<f64>> = BTreeMap::new();
             for (_, j) in &done {
                 if let Ok(t) = Table::read(&RunDir::at(&j.dir).epochs_csv()) {
@@ -399,6 +403,7 @@ pub fn aggregate(jobs: &[Job]) -> SweepResults {
                 ap3d_seeds: ap_values,
                 ap3d_03_by_range,
                 heading_deg,
+                direction_right,
                 train_seconds: mean_std(&done.iter().map(|(s, _)| s.train_seconds).collect::<Vec<_>>()),
                 params: done.first().map_or(0, |(s, _)| s.params),
                 curve: curves.into_iter().map(|(e, a)| (e as f64, mean_std(&a).0)).collect(),
@@ -414,7 +419,7 @@ impl SweepResults {
         let mut w = csv::Writer::from_writer(Vec::new());
         w.write_record([
             "variant", "model", "seeds_done", "seeds", "ap3d_0.3_mean", "ap3d_0.3_std", "ap3d_0.3_ci95", "ap3d_0.5_mean", "ap3d_0.5_std", "ap3d_0.5_ci95", "ap3d_0.7_mean",
-            "ap3d_0.7_std", "ap3d_0.7_ci95", "ap3d_0.3_0-10m", "ap3d_0.3_10-20m", "ap3d_0.3_20-25m", "heading_error_deg", "train_seconds_mean", "train_seconds_std", "params",
+            "ap3d_0.7_std", "ap3d_0.7_ci95", "ap3d_0.3_0-10m", "ap3d_0.3_10-20m", "ap3d_0.3_20-25m", "heading_error_deg", "heading_direction_right", "train_seconds_mean", "train_seconds_std", "params",
             "d_ap3d_0.3_vs_first", "d_ap3d_0.3_ci95", "d_ap3d_0.5_vs_first", "d_ap3d_0.5_ci95", "d_ap3d_0.7_vs_first", "d_ap3d_0.7_ci95",
         ])?;
         let opt = |x: Option<f64>| x.map_or_else(String::new, |v| format!("{v}"));
@@ -425,6 +430,7 @@ impl SweepResults {
             }
             row.extend((0..3).map(|b| opt(v.ap3d_03_by_range.map(|r| r[b]))));
             row.push(opt(v.heading_deg));
+            row.push(opt(v.direction_right));
             row.extend([format!("{}", v.train_seconds.0), format!("{}", v.train_seconds.1), v.params.to_string()]);
             for i in 0..3 {
                 let (d, h) = v.difference(&self.variants[0], i);
@@ -439,7 +445,7 @@ impl SweepResults {
     /// brackets where there are at least 2 seeds; range bands and heading error where reported).
     pub fn to_markdown(&self) -> String {
         let mut s = String::from(
-            "| variant | model | seeds | AP3D@0.3 (%) | AP3D@0.5 (%) | AP3D@0.7 (%) | AP3D@0.3 by range 0–10 / 10–20 / 20–25 m (%) | heading error | train time | params |\n|---|---|---|---|---|---|---|---|---|---|\n",
+            "| variant | model | seeds | AP3D@0.3 (%) | AP3D@0.5 (%) | AP3D@0.7 (%) | AP3D@0.3 by range 0–10 / 10–20 / 20–25 m (%) | heading error (direction within 90°) | train time | params |\n|---|---|---|---|---|---|---|---|---|---|\n",
         );
         for v in &self.variants {
             let ap = |i: usize| {
@@ -452,7 +458,11 @@ impl SweepResults {
                 format!("{:.1} ± {:.1}{interval}", 100.0 * m, 100.0 * sd)
             };
             let bands = v.ap3d_03_by_range.map_or_else(|| "–".to_string(), |r| format!("{:.1} / {:.1} / {:.1}", 100.0 * r[0], 100.0 * r[1], 100.0 * r[2]));
-            let heading = v.heading_deg.map_or_else(|| "–".to_string(), |h| format!("{h:.0}°"));
+            let heading = match (v.heading_deg, v.direction_right) {
+                (Some(h), Some(r)) => format!("{h:.0}° ({:.0} %)", 100.0 * r),
+                (Some(h), None) => format!("{h:.0}°"),
+                _ => "–".to_string(),
+            };
             let t = if v.done == 0 { "–".to_string() } else { format!("{:.0} ± {:.0} s", v.train_seconds.0, v.train_seconds.1) };
             s.push_str(&format!("| {} | {} | {}/{} | {} | {} | {} | {bands} | {heading} | {} | {} |\n", v.variant, v.model, v.done, v.planned, ap(0), ap(1), ap(2), t, v.params));
         }

@@ -65,6 +65,12 @@ pub struct HeadingError {
     pub median_deg: f64,
     /// Median of the same difference taken modulo 180° (the box's axis), in [0, 90]: all IoU sees.
     pub median_axis_deg: f64,
+    /// Share of the matched boxes whose heading is within 90° of the truth (chance 0.5): the
+    /// direction apart from the axis. Errors are bimodal once the axis is learned (near 0° or
+    /// near 180°), and then the median over 360° says little about the direction. `None` in
+    /// summaries written before it was reported.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub direction_right: Option<f64>,
 }
 
 impl HeadingError {
@@ -95,13 +101,23 @@ impl HeadingError {
             return None;
         }
         let axis: Vec<f64> = errors.iter().map(|e| e.min(std::f64::consts::PI - e)).collect();
-        Some(HeadingError { matched: errors.len(), median_deg: stats::median(errors).to_degrees(), median_axis_deg: stats::median(axis).to_degrees() })
+        let right = errors.iter().filter(|&&e| e < std::f64::consts::FRAC_PI_2).count() as f64 / errors.len() as f64;
+        Some(HeadingError {
+            matched: errors.len(),
+            median_deg: stats::median(errors).to_degrees(),
+            median_axis_deg: stats::median(axis).to_degrees(),
+            direction_right: Some(right),
+        })
     }
 }
 
 impl std::fmt::Display for HeadingError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "median heading error {:.1}° ({:.1}° of the axis) over {} matched boxes", self.median_deg, self.median_axis_deg, self.matched)
+        write!(f, "median heading error {:.1}° ({:.1}° of the axis)", self.median_deg, self.median_axis_deg)?;
+        if let Some(right) = self.direction_right {
+            write!(f, ", direction within 90° for {:.1} % (chance 50 %)", 100.0 * right)?;
+        }
+        write!(f, " over {} matched boxes", self.matched)
     }
 }
 
@@ -210,5 +226,33 @@ mod tests {
         let shifted = Box3d { cx: 5.3, ..b };
         let r = score(&many(&|i| vec![Detection { bbox: shifted, score: 0.5 + i as f64 / 100.0 }]), &p);
         assert!(r.ap3d[0].ap > 0.9 && r.ap3d[2].ap < 0.1, "{:?}", [r.ap3d[0].ap, r.ap3d[2].ap]);
+    }
+
+    /// Square boxes (IoU does not see the heading) turned by hand-picked errors: the medians over
+    /// 360° and of the axis, and the share pointing the right way, worked out by hand.
+    #[test]
+    fn heading_errors_split_the_axis_from_the_direction() {
+        let gt = Box3d { cx: 5.0, cy: 1.0, cz: 0.1, l: 0.6, w: 0.6, h: 1.7, rot_z: 0.3 };
+        // Errors 10°, 20° and 100° the right way round, 170° (axis 10°) and 190° (= −170°) flipped.
+        let frames: Vec<FrameResult> = [10.0f64, 20.0, 100.0, 170.0, 190.0]
+            .iter()
+            .enumerate()
+            .map(|(i, e)| FrameResult {
+                sequence: "s".into(),
+                name: format!("{i:06}"),
+                gt: vec![gt],
+                num_points: vec![50],
+                detections: vec![Detection { bbox: Box3d { rot_z: gt.rot_z + e.to_radians(), ..gt }, score: 0.9 }],
+            })
+            .collect();
+        let h = HeadingError::of(&frames, &Protocol::official()).expect("every box matches");
+        assert_eq!(h.matched, 5);
+        // Sorted over 360°: 10, 20, 100, 170, 170 → 100; of the axis: 10, 20, 80, 10, 10 → 10.
+        assert!((h.median_deg - 100.0).abs() < 1e-6, "{}", h.median_deg);
+        assert!((h.median_axis_deg - 10.0).abs() < 1e-6, "{}", h.median_axis_deg);
+        assert_eq!(h.direction_right, Some(0.4), "10° and 20° only: 100° and the two flipped ones are not");
+        // A summary written before the share was reported still reads.
+        let old: HeadingError = serde_json::from_str(r#"{"matched": 3, "median_deg": 80.0, "median_axis_deg": 20.0}"#).unwrap();
+        assert_eq!(old.direction_right, None);
     }
 }
