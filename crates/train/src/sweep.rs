@@ -355,6 +355,12 @@ impl VariantResult {
     }
 }
 
+/// The mean of the values the seeds report; `None` when none does (older summaries lack a field).
+fn mean_of_reported(values: impl Iterator<Item = Option<f64>>) -> Option<f64> {
+    let values: Vec<f64> = values.flatten().collect();
+    (!values.is_empty()).then(|| mean_std(&values).0)
+}
+
 /// All variants' results.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SweepResults {
@@ -380,10 +386,8 @@ pub fn aggregate(jobs: &[Job]) -> SweepResults {
             let ap3d_ci95 = [0, 1, 2].map(|i| ci95_half_width(ap_values[i].len(), ap3d[i].1));
             let bands: Vec<[[f64; 3]; 3]> = done.iter().filter_map(|(s, _)| s.last_ap3d_by_range).collect();
             let ap3d_03_by_range = (!bands.is_empty()).then(|| [0, 1, 2].map(|b| mean_std(&bands.iter().map(|x| x[b][0]).collect::<Vec<_>>()).0));
-            let headings: Vec<f64> = done.iter().filter_map(|(s, _)| s.last_heading.map(|h| h.median_deg)).collect();
-            let heading_deg = (!headings.is_empty()).then(|| mean_std(&headings).0);
-            let rights: Vec<f64> = done.iter().filter_map(|(s, _)| s.last_heading.and_then(|h| h.direction_right)).collect();
-            let direction_right = (!rights.is_empty()).then(|| mean_std(&rights).0);
+            let heading_deg = mean_of_reported(done.iter().map(|(s, _)| s.last_heading.map(|h| h.median_deg)));
+            let direction_right = mean_of_reported(done.iter().map(|(s, _)| s.last_heading.and_then(|h| h.direction_right)));
             let mut curves: BTreeMap<i64, Vec<f64>> = BTreeMap::new();
             for (_, j) in &done {
                 if let Ok(t) = Table::read(&RunDir::at(&j.dir).epochs_csv()) {
