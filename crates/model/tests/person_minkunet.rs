@@ -130,3 +130,32 @@ fn sin_cos_heading_is_fitted_and_decoded() {
     assert!(after < before / 4.0, "the heading term is fitted: {before} → {after}");
     assert!(median < 30.0, "the decoded heading follows the fitted one: median error {median}°");
 }
+
+/// The heading as an axis and a facing (`heading = "axis_facing"`): a `2·bins + 8`-channel head
+/// whose facing term is fitted on the training frames, and whose boxes point the way it learned,
+/// not only along the right axis.
+#[test]
+fn axis_and_facing_heading_is_fitted_and_decoded() {
+    let batch = sim_batch("pmu-facing", 2, 16, 5.0, 11);
+    let device = Device::flex().autodiff();
+    let cfg = PersonMinkUNetConfig { cls_weight: 1.0, heading: HeadingEncoding::AxisFacing, ..small() };
+    let model = common::initialised(&device, Some(7), || cfg.init(&device));
+    assert_eq!(model.coder().channels(), 32);
+    let facing_term = |m: &PersonMinkUNet| {
+        let l = m.loss(&batch, &device);
+        assert_eq!(l.terms.iter().map(|(n, _)| *n).collect::<Vec<_>>(), ["cls", "loc", "dims", "bin", "residual", "facing"]);
+        l.terms[5].1.to_data().try_to_vec::<f32>().unwrap()[0]
+    };
+    let before = facing_term(&model);
+    let (model, _) = train(model, &batch, &device, 150, 4e-3);
+    let after = facing_term(&model);
+    let model = model.valid();
+    let dets = model.detect(&batch, &Device::flex());
+    let errors = common::heading_errors(&batch, &dets);
+    let right = errors.iter().filter(|&&e| e < 90.0).count() as f64 / errors.len() as f64;
+    let median = errors[errors.len() / 2];
+    eprintln!("facing term {before:.3} → {after:.3}; median heading error {median:.1}°, {:.0} % within 90° over {} people", 100.0 * right, errors.len());
+    assert!(after < before / 4.0, "the facing term is fitted: {before} → {after}");
+    assert!(right > 0.8, "the decoded boxes point the fitted way: {:.0} % within 90°", 100.0 * right);
+    assert!(median < 30.0, "and along the fitted axis: median error {median}°");
+}

@@ -5,9 +5,11 @@
 //! Head channel layout (`2·bins + 7` channels): `[0]` cls logit, `[1..4]` centre offset (m),
 //! `[4..7]` `log(l/l̄), log(w/w̄), log(h/h̄)`, `[7..7+bins]` bin logits, `[7+bins..7+2·bins]` bin
 //! residuals (radians, not normalised). With [`HeadingEncoding::SinCos`] (9 channels), `[7]` and
-//! `[8]` are the heading's sine and cosine instead.
+//! `[8]` are the heading's sine and cosine instead. With [`HeadingEncoding::AxisFacing`]
+//! (`2·bins + 8` channels) the bins and residuals cover the heading's axis (0 to π) and `[7+2·bins]`
+//! is the facing logit: whether the person faces the sensor's side of that axis.
 
-use std::f64::consts::{PI, TAU};
+use std::f64::consts::{FRAC_PI_2, PI, TAU};
 
 use data_jrdb::Box3d;
 use serde::{Deserialize, Serialize};
@@ -25,6 +27,18 @@ pub const BINS: usize = 7;
 pub fn wrap_angle(a: f64) -> f64 {
     let r = (a + PI).rem_euclid(TAU) - PI;
     if r <= -PI { r + TAU } else { r }
+}
+
+/// Wraps an axis angle (defined modulo π) into (−π/2, π/2].
+pub fn wrap_axis(a: f64) -> f64 {
+    let r = (a + FRAC_PI_2).rem_euclid(PI) - FRAC_PI_2;
+    if r <= -FRAC_PI_2 { r + PI } else { r }
+}
+
+/// Whether heading `rot_z` at (cx, cy) points within 90° of the sensor (the base frame's origin).
+pub fn faces_sensor(cx: f64, cy: f64, rot_z: f64) -> bool {
+    let (s, c) = rot_z.sin_cos();
+    -(c * cx + s * cy) > 0.0
 }
 
 /// The frame a voxel's centre offset and heading are expressed in.
@@ -61,6 +75,12 @@ pub enum HeadingEncoding {
     Bins,
     /// sin θ and cos θ, regressed with an MSE; decoded as `atan2(sin, cos)`.
     SinCos,
+    /// The axis (θ mod π) as `num_bins` bins with residuals, and a logit for whether the person
+    /// faces the sensor (the heading within 90° of the direction from the box to the sensor, the
+    /// base frame's origin) or away. The axis is a shape the grid shows at any azimuth; facing or
+    /// not is whether the front or the back is the side in view, the same question wherever the
+    /// person stands, where "which of two opposite bins" is a different one at every azimuth.
+    AxisFacing,
 }
 
 /// A box encoded against one voxel centre: the regression targets of spec §1.9.
@@ -72,8 +92,11 @@ pub struct EncodedBox {
     pub log_dims: [f64; 3],
     /// The heading's bin, `floor((θ mod 2π) / bin)` (θ in the coder's frame).
     pub bin: usize,
-    /// `wrap(θ − (j + ½)·bin)` for every bin j (θ in the coder's frame).
+    /// `wrap(θ − (j + ½)·bin)` for every bin j (θ in the coder's frame; with
+    /// [`HeadingEncoding::AxisFacing`] the axis θ mod π, wrapped into (−π/2, π/2]).
     pub residuals: Vec<f64>,
+    /// Whether the heading points within 90° of the direction from the box's centre to the sensor.
+    pub faces_sensor: bool,
     /// The heading θ in the coder's frame (what [`HeadingEncoding::SinCos`] regresses).
     pub theta: f64,
 }
@@ -116,28 +139,39 @@ impl BoxCoder {
         Self { heading, ..self }
     }
 
-    /// Head channels: cls + offset + log-dims + bin logits + residuals = `2·bins + 7`, or
-    /// cls + offset + log-dims + sin + cos = 9.
+    /// Head channels: cls + offset + log-dims + bin logits + residuals = `2·bins + 7`, the same
+    /// and the facing logit = `2·bins + 8`, or cls + offset + log-dims + sin + cos = 9.
     pub fn channels(&self) -> usize {
         match self.heading {
             HeadingEncoding::Bins => 2 * self.num_bins + 7,
+            HeadingEncoding::AxisFacing => 2 * self.num_bins + 8,
             HeadingEncoding::SinCos => 9,
         }
     }
 
-    /// Width of one rotation bin, radians.
-    pub fn bin_width(&self) -> f64 {
-        TAU / self.num_bins as f64
+    /// Channel of the facing logit ([`HeadingEncoding::AxisFacing`]).
+    pub fn facing_channel(&self) -> usize {
+        BINS + 2 * self.num_bins
     }
 
-    /// Centre of bin `j`, radians in [0, 2π).
+    /// The turn the bins cover: 2π for the heading, π for its axis.
+    fn period(&self) -> f64 {
+        if self.heading == HeadingEncoding::AxisFacing { PI } else { TAU }
+    }
+
+    /// Width of one rotation bin, radians.
+    pub fn bin_width(&self) -> f64 {
+        self.period() / self.num_bins as f64
+    }
+
+    /// Centre of bin `j`, radians in [0, 2π) (in [0, π) for the axis).
     pub fn bin_centre(&self, j: usize) -> f64 {
         (j as f64 + 0.5) * self.bin_width()
     }
 
-    /// The bin of a heading.
+    /// The bin of a heading (of its axis with [`HeadingEncoding::AxisFacing`]).
     pub fn bin_of(&self, theta: f64) -> usize {
-        ((theta.rem_euclid(TAU) / self.bin_width()).floor() as usize).min(self.num_bins - 1)
+        ((theta.rem_euclid(self.period()) / self.bin_width()).floor() as usize).min(self.num_bins - 1)
     }
 
     /// Encodes `b` against the voxel centre `v`.
@@ -148,11 +182,16 @@ impl BoxCoder {
             Some((c, s)) => ([c * dx + s * dy, c * dy - s * dx, dz], wrap_angle(b.rot_z - s.atan2(c))),
             None => ([dx, dy, dz], b.rot_z),
         };
+        let residual = |j: usize| match self.heading {
+            HeadingEncoding::AxisFacing => wrap_axis(theta - self.bin_centre(j)),
+            _ => wrap_angle(theta - self.bin_centre(j)),
+        };
         EncodedBox {
             offset,
             log_dims: [0, 1, 2].map(|k| (dims[k] / self.mean_size[k]).ln()),
             bin: self.bin_of(theta),
-            residuals: (0..self.num_bins).map(|j| wrap_angle(theta - self.bin_centre(j))).collect(),
+            residuals: (0..self.num_bins).map(residual).collect(),
+            faces_sensor: faces_sensor(b.cx, b.cy, b.rot_z),
             theta,
         }
     }
@@ -166,10 +205,21 @@ impl BoxCoder {
     /// Decodes an encoding back into a box.
     pub fn decode(&self, e: &EncodedBox, v: [f64; 3]) -> Box3d {
         let theta = match self.heading {
-            HeadingEncoding::Bins => self.decode_heading(e.bin, e.residuals[e.bin]),
+            HeadingEncoding::Bins | HeadingEncoding::AxisFacing => self.decode_heading(e.bin, e.residuals[e.bin]),
             HeadingEncoding::SinCos => wrap_angle(e.theta),
         };
-        self.decode_parts(v, e.offset, e.log_dims, theta)
+        let b = self.decode_parts(v, e.offset, e.log_dims, theta);
+        self.orient(b, e.faces_sensor)
+    }
+
+    /// With [`HeadingEncoding::AxisFacing`], turns `b` (whose heading is only right as an axis) to
+    /// face the sensor or away; other encodings decode the heading itself and keep it.
+    fn orient(&self, b: Box3d, faces: bool) -> Box3d {
+        if self.heading != HeadingEncoding::AxisFacing {
+            return b;
+        }
+        let flip = faces_sensor(b.cx, b.cy, b.rot_z) != faces;
+        Box3d { rot_z: if flip { wrap_angle(b.rot_z + PI) } else { b.rot_z }, ..b }
     }
 
     /// Decodes one voxel's head output (`channels()` values): the arg-max bin and its residual,
@@ -177,7 +227,7 @@ impl BoxCoder {
     pub fn decode_row(&self, row: &[f32], v: [f64; 3]) -> Box3d {
         let f = |i: usize| row[i] as f64;
         let theta = match self.heading {
-            HeadingEncoding::Bins => {
+            HeadingEncoding::Bins | HeadingEncoding::AxisFacing => {
                 let bins = &row[BINS..BINS + self.num_bins];
                 let k = (0..self.num_bins).fold(0, |best, j| if bins[j] > bins[best] { j } else { best });
                 self.decode_heading(k, f(BINS + self.num_bins + k))
@@ -186,7 +236,9 @@ impl BoxCoder {
         };
         let offset = [f(OFFSET), f(OFFSET + 1), f(OFFSET + 2)];
         let log_dims = [f(LOG_DIMS), f(LOG_DIMS + 1), f(LOG_DIMS + 2)];
-        self.decode_parts(v, offset, log_dims, theta)
+        let b = self.decode_parts(v, offset, log_dims, theta);
+        let faces = self.heading == HeadingEncoding::AxisFacing && row[self.facing_channel()] > 0.0;
+        self.orient(b, faces)
     }
 
     fn decode_parts(&self, v: [f64; 3], offset: [f64; 3], log_dims: [f64; 3], theta: f64) -> Box3d {
@@ -209,7 +261,37 @@ mod tests {
         for frame in [BoxFrame::Base, BoxFrame::Ray] {
             round_trip(BoxCoder::new([0.9, 0.5, 1.7], 12).in_frame(frame));
             round_trip(BoxCoder::new([0.9, 0.5, 1.7], 12).in_frame(frame).with_heading(HeadingEncoding::SinCos));
+            round_trip(BoxCoder::new([0.9, 0.5, 1.7], 12).in_frame(frame).with_heading(HeadingEncoding::AxisFacing));
         }
+    }
+
+    /// Hand-derived: a person 5 m ahead of the sensor (+x) facing it (θ = π) has the axis 0, bin 0
+    /// of 12 bins of 15°, residual −7.5°, and faces the sensor; facing +y (θ = π/2, across the line
+    /// of sight, nudged towards the sensor) has the axis in bin 6 and faces it; away (θ = 0) not.
+    /// A row with the facing logit's sign turned decodes the opposite heading.
+    #[test]
+    fn axis_and_facing_by_hand() {
+        let coder = BoxCoder::new([0.9, 0.5, 1.7], 12).with_heading(HeadingEncoding::AxisFacing);
+        assert_eq!(coder.channels(), 32);
+        assert!((coder.bin_width() - PI / 12.0).abs() < 1e-15);
+        let v = [4.9, 0.1, 0.0];
+        let b = Box3d { cx: 5.0, cy: 0.0, cz: 0.0, l: 0.4, w: 0.6, h: 1.7, rot_z: PI };
+        let e = coder.encode(&b, v);
+        assert_eq!(e.bin, 0);
+        assert!((e.residuals[0] + PI / 24.0).abs() < 1e-12, "{:?}", e.residuals);
+        assert!((e.residuals[11] - PI / 24.0).abs() < 1e-12, "the axis 0 is π, half a bin above bin 11's centre");
+        assert!(e.faces_sensor);
+        let across = coder.encode(&Box3d { rot_z: PI / 2.0 + 0.01, ..b }, v);
+        assert_eq!((across.bin, across.faces_sensor), (6, true));
+        assert!(!coder.encode(&Box3d { rot_z: 0.0, ..b }, v).faces_sensor);
+        let mut row = vec![0f32; 32];
+        row[BINS] = 5.0;
+        row[BINS + 12] = e.residuals[0] as f32;
+        row[coder.facing_channel()] = 2.0;
+        assert!((coder.decode_row(&row, v).rot_z.abs() - PI).abs() < 1e-6, "faces the sensor: θ = ±π");
+        row[coder.facing_channel()] = -2.0;
+        assert!(coder.decode_row(&row, v).rot_z.abs() < 1e-6, "faces away: θ = 0");
+        assert!((wrap_axis(PI) - 0.0).abs() < 1e-15 && (wrap_axis(-FRAC_PI_2) - FRAC_PI_2).abs() < 1e-15);
     }
 
     /// Hand-derived: a voxel at (0, 5) looks along +y (φ = 90°); a centre 0.2 m farther out and
@@ -242,7 +324,12 @@ mod tests {
     }
 
     fn round_trip(coder: BoxCoder) {
-        assert_eq!(coder.channels(), if coder.heading == HeadingEncoding::Bins { 31 } else { 9 });
+        let want = match coder.heading {
+            HeadingEncoding::Bins => 31,
+            HeadingEncoding::AxisFacing => 32,
+            HeadingEncoding::SinCos => 9,
+        };
+        assert_eq!(coder.channels(), want);
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
         let mut headings: Vec<f64> = (0..500).map(|_| rng.random_range(-10.0..10.0)).collect();
         // Bin edges, ±π and 0 are where an off-by-one would show.
@@ -253,6 +340,7 @@ mod tests {
             let v = [b.cx + rng.random_range(-0.5..0.5), b.cy - 0.2, b.cz + 0.1];
             let e = coder.encode(&b, v);
             assert!(e.residuals[e.bin].abs() <= coder.bin_width() / 2.0 + 1e-12, "{e:?}");
+            assert_eq!(e.faces_sensor, faces_sensor(b.cx, b.cy, b.rot_z));
             assert!(e.residuals.iter().all(|r| r.abs() <= PI));
             let d = coder.decode(&e, v);
             for (a, b) in [(d.cx, b.cx), (d.cy, b.cy), (d.cz, b.cz), (d.l, b.l), (d.w, b.w), (d.h, b.h)] {
@@ -266,10 +354,13 @@ mod tests {
             row[OFFSET..OFFSET + 3].copy_from_slice(&e.offset.map(|x| x as f32));
             row[LOG_DIMS..LOG_DIMS + 3].copy_from_slice(&e.log_dims.map(|x| x as f32));
             match coder.heading {
-                HeadingEncoding::Bins => {
+                HeadingEncoding::Bins | HeadingEncoding::AxisFacing => {
                     row[BINS + e.bin] = 5.0;
                     for (j, r) in e.residuals.iter().enumerate() {
                         row[BINS + 12 + j] = *r as f32;
+                    }
+                    if coder.heading == HeadingEncoding::AxisFacing {
+                        row[coder.facing_channel()] = if e.faces_sensor { 3.0 } else { -3.0 };
                     }
                 }
                 // Any positive multiple of (sin, cos) is the same heading.

@@ -56,8 +56,10 @@ pub struct PersonMinkUNetConfig {
     pub width: f64,
     /// Rotation bins (12).
     pub num_bins: usize,
-    /// The heading as bins with residuals (`"bins"`, the authors') or as a sine and cosine
-    /// (`"sin_cos"`, weighted by `sin_cos_weight`; `num_bins` and the bin weights then unused).
+    /// The heading as bins with residuals (`"bins"`, the authors'), as its axis in `num_bins` bins
+    /// over 180° and a facing logit (`"axis_facing"`, the facing weighted by `facing_weight`), or
+    /// as a sine and cosine (`"sin_cos"`, weighted by `sin_cos_weight`; `num_bins` and the bin
+    /// weights then unused).
     pub heading: HeadingEncoding,
     /// Mean person size (l, w, h) the log-dimensions are relative to (0.9, 0.5, 1.7).
     pub mean_size: [f64; 3],
@@ -80,6 +82,8 @@ pub struct PersonMinkUNetConfig {
     pub residual_weight: f64,
     /// Weight of the sin/cos MSE with `heading = "sin_cos"` (1).
     pub sin_cos_weight: f64,
+    /// Weight of the facing BCE with `heading = "axis_facing"` (1).
+    pub facing_weight: f64,
     /// Post-processing of the per-voxel boxes.
     pub post: PostProcessConfig,
 }
@@ -103,6 +107,7 @@ impl Default for PersonMinkUNetConfig {
             bin_weight: 0.1,
             residual_weight: 0.01,
             sin_cos_weight: 1.0,
+            facing_weight: 1.0,
             post: PostProcessConfig::default(),
         }
     }

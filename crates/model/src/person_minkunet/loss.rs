@@ -1,6 +1,7 @@
 //! Person-MinkUNet's loss (spec §1.10): soft-target BCE over all voxels, and on foreground voxels
 //! centre MSE, log-dimension MSE, bin cross-entropy and residual MSE (or, with the heading as a
-//! sine and cosine, their MSE), each reported on its own.
+//! sine and cosine, their MSE; with the axis and facing, a facing BCE besides the bins), each
+//! reported on its own.
 
 use sparse_conv::burn::tensor::activation::{log_sigmoid, log_softmax, relu};
 use sparse_conv::burn::tensor::{Device, Int, Tensor, TensorData};
@@ -24,11 +25,13 @@ pub struct LossWeights {
     pub residual: f64,
     /// sin/cos MSE on foreground voxels ([`HeadingEncoding::SinCos`] only).
     pub sin_cos: f64,
+    /// Facing BCE on foreground voxels ([`HeadingEncoding::AxisFacing`] only).
+    pub facing: f64,
 }
 
 impl Default for LossWeights {
     fn default() -> Self {
-        Self { cls: 100.0, loc: 1.0, dims: 1.0, bin: 0.1, residual: 0.01, sin_cos: 1.0 }
+        Self { cls: 100.0, loc: 1.0, dims: 1.0, bin: 0.1, residual: 0.01, sin_cos: 1.0, facing: 1.0 }
     }
 }
 
@@ -36,6 +39,8 @@ impl Default for LossWeights {
 pub const TERMS: [&str; 5] = ["cls", "loc", "dims", "bin", "residual"];
 /// Names of the terms with the heading as a sine and cosine.
 pub const TERMS_SIN_COS: [&str; 4] = ["cls", "loc", "dims", "heading"];
+/// Names of the terms with the heading as an axis and a facing.
+pub const TERMS_AXIS_FACING: [&str; 6] = ["cls", "loc", "dims", "bin", "residual", "facing"];
 
 /// BCE with logits against a soft target, element-wise and stable for any logit:
 /// `max(x, 0) − x·t + log(1 + e^{−|x|})`.
@@ -48,14 +53,16 @@ fn floats<const D: usize>(v: &[f32], shape: [usize; D], device: &Device) -> Tens
     Tensor::from_data(TensorData::new(v.to_vec(), shape), device)
 }
 
-/// The weighted terms and their sum for head output `out` (`[M, 2·bins + 7]`, or `[M, 9]` with
-/// `heading` = sin/cos) and `targets`: [`TERMS`] or [`TERMS_SIN_COS`].
+/// The weighted terms and their sum for head output `out` (`[M, 2·bins + 7]`, `[M, 2·bins + 8]`
+/// with the axis and facing, or `[M, 9]` with `heading` = sin/cos) and `targets`: [`TERMS`],
+/// [`TERMS_AXIS_FACING`] or [`TERMS_SIN_COS`].
 ///
 /// A batch without foreground voxels gives zero for the foreground terms (finite loss).
 pub fn loss(out: Tensor<2>, targets: &VoxelTargets, num_bins: usize, heading: HeadingEncoding, w: &LossWeights, device: &Device) -> LossTerms {
     let [m, c] = out.dims();
     let want = match heading {
         HeadingEncoding::Bins => 2 * num_bins + 7,
+        HeadingEncoding::AxisFacing => 2 * num_bins + 8,
         HeadingEncoding::SinCos => 9,
     };
     assert_eq!(c, want, "head output has {c} channels, the layout needs {want}");
@@ -65,6 +72,7 @@ pub fn loss(out: Tensor<2>, targets: &VoxelTargets, num_bins: usize, heading: He
     let cls = bce_with_logits(logits, t_cls).mean() * w.cls;
     let names: &[&'static str] = match heading {
         HeadingEncoding::Bins => &TERMS,
+        HeadingEncoding::AxisFacing => &TERMS_AXIS_FACING,
         HeadingEncoding::SinCos => &TERMS_SIN_COS,
     };
     let f = targets.fg.len();
@@ -78,13 +86,19 @@ pub fn loss(out: Tensor<2>, targets: &VoxelTargets, num_bins: usize, heading: He
         let dims = mse(rows.clone().slice([0..f, LOG_DIMS..LOG_DIMS + 3]), floats(&targets.log_dims, [f, 3], device));
         let mut terms = vec![loc * w.loc, dims * w.dims];
         match heading {
-            HeadingEncoding::Bins => {
+            HeadingEncoding::Bins | HeadingEncoding::AxisFacing => {
                 let log_p = log_softmax(rows.clone().slice([0..f, BINS..BINS + num_bins]), 1);
                 let k = Tensor::<1, Int>::from_data(TensorData::new(targets.bin.clone(), [f]), device).reshape([f, 1]);
                 let bin = -log_p.gather(1, k).mean();
-                let res_pred = rows.slice([0..f, BINS + num_bins..BINS + 2 * num_bins]);
+                let res_pred = rows.clone().slice([0..f, BINS + num_bins..BINS + 2 * num_bins]);
                 let residual = mse(res_pred, floats(&targets.residuals, [f, num_bins], device));
                 terms.extend([bin * w.bin, residual * w.residual]);
+                if heading == HeadingEncoding::AxisFacing {
+                    let at = BINS + 2 * num_bins;
+                    let logit = rows.slice([0..f, at..at + 1]).reshape([f]);
+                    let facing = bce_with_logits(logit, floats(&targets.facing, [f], device)).mean();
+                    terms.push(facing * w.facing);
+                }
             }
             HeadingEncoding::SinCos => {
                 let sin_cos = mse(rows.slice([0..f, BINS..BINS + 2]), floats(&targets.sin_cos, [f, 2], device));
@@ -124,6 +138,7 @@ mod tests {
             bin: vec![0, 0],
             residuals: vec![0.2, 0.0, 0.5, -1.0],
             sin_cos: vec![0.0, 1.0, 1.0, 0.0],
+            facing: vec![1.0, 0.0],
         };
         let w = LossWeights::default();
         let l = loss(out.clone(), &t, bins, HeadingEncoding::Bins, &w, &device);
@@ -142,13 +157,23 @@ mod tests {
         assert_eq!(l.terms.iter().map(|(n, _)| *n).collect::<Vec<_>>(), TERMS);
 
         // The same rows read as the sin/cos layout (channels 7 and 8 are sin and cos).
-        let l = loss(out.slice([0..3, 0..9]), &t, bins, HeadingEncoding::SinCos, &w, &device);
+        let l = loss(out.clone().slice([0..3, 0..9]), &t, bins, HeadingEncoding::SinCos, &w, &device);
         // Row 0 predicts (1, −1) against (0, 1); row 2 (0, 3) against (1, 0).
         let heading = (1.0 + 4.0 + 1.0 + 9.0) / 4.0;
         for ((name, got), want) in l.terms.iter().zip([cls, loc, dims, heading]) {
             assert!((scalar(got) - want).abs() < 1e-4 * want.abs().max(1.0), "{name}: {} vs {want}", scalar(got));
         }
         assert_eq!(l.terms.iter().map(|(n, _)| *n).collect::<Vec<_>>(), TERMS_SIN_COS);
+
+        // The axis-and-facing layout: the same rows and a facing logit (0.5, 9, −1.5) after them;
+        // the bin terms are the bins' own, the facing BCE is over the two foreground rows.
+        let facing_logits = Tensor::<1>::from_data(TensorData::new(vec![0.5f32, 9.0, -1.5], [3]), &device).reshape([3, 1]);
+        let l = loss(Tensor::cat(vec![out, facing_logits], 1), &t, bins, HeadingEncoding::AxisFacing, &w, &device);
+        let facing = (bce(0.5, 1.0) + bce(-1.5, 0.0)) / 2.0;
+        for ((name, got), want) in l.terms.iter().zip([cls, loc, dims, bin, residual, facing]) {
+            assert!((scalar(got) - want).abs() < 1e-4 * want.abs().max(1.0), "{name}: {} vs {want}", scalar(got));
+        }
+        assert_eq!(l.terms.iter().map(|(n, _)| *n).collect::<Vec<_>>(), TERMS_AXIS_FACING);
     }
 
     #[test]

@@ -62,7 +62,7 @@ impl PersonMinkUNet {
     /// The loss weights of the config.
     pub fn loss_weights(&self) -> LossWeights {
         let c = &self.config;
-        LossWeights { cls: c.cls_weight, loc: c.loc_weight, dims: c.dims_weight, bin: c.bin_weight, residual: c.residual_weight, sin_cos: c.sin_cos_weight }
+        LossWeights { cls: c.cls_weight, loc: c.loc_weight, dims: c.dims_weight, bin: c.bin_weight, residual: c.residual_weight, sin_cos: c.sin_cos_weight, facing: c.facing_weight }
     }
 
     /// The batch's voxels with `features` as a stride-1 sparse tensor on `device`.

@@ -23,6 +23,8 @@ pub struct VoxelTargets {
     pub residuals: Vec<f32>,
     /// sin θ and cos θ of the foreground rows' headings (the coder's frame), F×2.
     pub sin_cos: Vec<f32>,
+    /// 1 where the foreground row's person faces the sensor, else 0, F.
+    pub facing: Vec<f32>,
 }
 
 /// `t_c = in · (1 − clamp(d, 0, 1))` for voxel centre `v` and box `b` (spec §1.9): `in` is
@@ -69,6 +71,7 @@ pub fn assign(batch: &Batch, coder: &BoxCoder, epsilon: f64, variant: TargetVari
             t.bin.push(e.bin as i64);
             t.residuals.extend(e.residuals.iter().map(|&x| x as f32));
             t.sin_cos.extend([e.theta.sin() as f32, e.theta.cos() as f32]);
+            t.facing.push(if e.faces_sensor { 1.0 } else { 0.0 });
         }
     }
     t
