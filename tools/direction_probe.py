@@ -16,8 +16,10 @@ hold about the direction at that resolution; 50 % means nothing a linear read of
 finds. `--voxel S` first replaces the points by the centres of the occupied voxels of a
 world-aligned grid of S metres: what a sparse network's occupancy shows, before any point
 feature. `--detections DIR` also scores it in the frames of a detector's matched boxes (their
-axis and place, not the labels'): what a second stage on those boxes would tell. Two baselines come with it: the majority class, and the accuracy of "faces the side with
-more points" (what a rule of thumb would do). numpy only.
+axis and place, not the labels'), matched by BEV distance (0.5 m) to counted people, with the
+detector's own heading scored on the same pairs: what a second stage on those boxes would tell.
+Two baselines come with it: the majority class, and the accuracy of "faces the side of the box
+centre with more of the points" (a rule of thumb that is given the box). numpy only.
 """
 import argparse
 import glob
@@ -195,7 +197,7 @@ def main():
     more_ahead = np.array([(t[0][:, 0] > 0).mean() > 0.5 for t in data["val"]])
     rng = np.array([t[2] for t in data["val"]])
     bands = [(0, 10), (10, 20), (20, 25.01)]
-    print(f"majority class: {majority:.1%}; 'faces the side with more of its points': {(more_ahead == yva).mean():.1%}")
+    print(f"majority class: {majority:.1%}; 'faces the side of the box centre with more of its points': {(more_ahead == yva).mean():.1%}")
     for centre, k in (("the points' centroid", 1), ("the box's centre (given)", 0)):
         for cell in args.cell:
             xtr = np.stack([histogram(t[k], cell) for t in data["train"]])
@@ -209,6 +211,8 @@ def main():
                   f"training {acc_tr:.1%}, validation {right.mean():.1%} (0–10 / 10–20 / 20–25 m: {by_band})")
             if k == 1 and args.detections:
                 det = list(people(args.root, "val", cal, args.voxel, args.detections))
+                if not det:
+                    raise SystemExit(f"{args.detections}: no detection scoring ≥ 0.3 lies within 0.5 m of a counted person")
                 xd = np.stack([histogram(t[1], cell) for t in det])
                 yd = np.array([t[3] for t in det])
                 own = np.mean([t[4] < 90 for t in det])

@@ -90,7 +90,8 @@ pub struct EncodedBox {
     pub offset: [f64; 3],
     /// `log(dim / mean)` for l, w, h.
     pub log_dims: [f64; 3],
-    /// The heading's bin, `floor((θ mod 2π) / bin)` (θ in the coder's frame).
+    /// The heading's bin, `floor((θ mod 2π) / bin)` (θ in the coder's frame; θ mod π with
+    /// [`HeadingEncoding::AxisFacing`]).
     pub bin: usize,
     /// `wrap(θ − (j + ½)·bin)` for every bin j (θ in the coder's frame; with
     /// [`HeadingEncoding::AxisFacing`] the axis θ mod π, wrapped into (−π/2, π/2]).
@@ -292,6 +293,20 @@ mod tests {
         row[coder.facing_channel()] = -2.0;
         assert!(coder.decode_row(&row, v).rot_z.abs() < 1e-6, "faces away: θ = 0");
         assert!((wrap_axis(PI) - 0.0).abs() < 1e-15 && (wrap_axis(-FRAC_PI_2) - FRAC_PI_2).abs() < 1e-15);
+        // In the ray frame the axis is the observation angle's (α = θ − φ = π at v: axis 0), and
+        // the scene turned by 30° about the sensor encodes the same bin, residuals and facing.
+        let ray = coder.in_frame(BoxFrame::Ray);
+        let r = ray.encode(&b, v);
+        let phi = v[1].atan2(v[0]);
+        assert_eq!(r.bin, ray.bin_of(PI - phi));
+        assert!(r.faces_sensor);
+        let (c, s) = ((PI / 6.0).cos(), (PI / 6.0).sin());
+        let turned = Box3d { cx: c * b.cx - s * b.cy, cy: s * b.cx + c * b.cy, rot_z: b.rot_z + PI / 6.0, ..b };
+        let r30 = ray.encode(&turned, [c * v[0] - s * v[1], s * v[0] + c * v[1], v[2]]);
+        assert_eq!((r30.bin, r30.faces_sensor), (r.bin, r.faces_sensor));
+        for (x, y) in r30.residuals.iter().zip(&r.residuals) {
+            assert!((x - y).abs() < 1e-12, "{r30:?} vs {r:?}");
+        }
     }
 
     /// Hand-derived: a voxel at (0, 5) looks along +y (φ = 90°); a centre 0.2 m farther out and
@@ -340,8 +355,11 @@ mod tests {
             let v = [b.cx + rng.random_range(-0.5..0.5), b.cy - 0.2, b.cz + 0.1];
             let e = coder.encode(&b, v);
             assert!(e.residuals[e.bin].abs() <= coder.bin_width() / 2.0 + 1e-12, "{e:?}");
-            assert_eq!(e.faces_sensor, faces_sensor(b.cx, b.cy, b.rot_z));
-            assert!(e.residuals.iter().all(|r| r.abs() <= PI));
+            // Facing the sensor: the heading within 90° of the bearing from the box to the origin.
+            let bearing = (-b.cy).atan2(-b.cx);
+            assert_eq!(e.faces_sensor, wrap_angle(b.rot_z - bearing).abs() < PI / 2.0, "{b:?}");
+            let bound = if coder.heading == HeadingEncoding::AxisFacing { PI / 2.0 } else { PI };
+            assert!(e.residuals.iter().all(|r| r.abs() <= bound + 1e-12), "{e:?}");
             let d = coder.decode(&e, v);
             for (a, b) in [(d.cx, b.cx), (d.cy, b.cy), (d.cz, b.cz), (d.l, b.l), (d.w, b.w), (d.h, b.h)] {
                 assert!((a - b).abs() < 1e-12, "{d:?} vs {b:?}");
