@@ -189,6 +189,9 @@ def main():
     args = ap.parse_args()
     cal = read_calibration(args.root)
     data = {split: list(people(args.root, split, cal, args.voxel)) for split in ("train", "val")}
+    det = list(people(args.root, "val", cal, args.voxel, args.detections)) if args.detections else None
+    if det == []:
+        raise SystemExit(f"{args.detections}: no detection scoring ≥ 0.3 lies within 0.5 m of a counted person")
     ytr = np.array([t[3] for t in data["train"]], dtype=float)
     yva = np.array([t[3] for t in data["val"]], dtype=float)
     print(f"{len(ytr)} training people, {len(yva)} validation people; facing the sensor: "
@@ -209,10 +212,7 @@ def main():
             by_band = " / ".join(f"{right[(rng >= a) & (rng < b)].mean():.1%}" for a, b in bands)
             print(f"centred on {centre}, cell {cell:.2f} m ({keep.sum()} cells used): "
                   f"training {acc_tr:.1%}, validation {right.mean():.1%} (0–10 / 10–20 / 20–25 m: {by_band})")
-            if k == 1 and args.detections:
-                det = list(people(args.root, "val", cal, args.voxel, args.detections))
-                if not det:
-                    raise SystemExit(f"{args.detections}: no detection scoring ≥ 0.3 lies within 0.5 m of a counted person")
+            if k == 1 and det:
                 xd = np.stack([histogram(t[1], cell) for t in det])
                 yd = np.array([t[3] for t in det])
                 own = np.mean([t[4] < 90 for t in det])

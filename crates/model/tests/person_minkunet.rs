@@ -5,7 +5,7 @@ mod common;
 
 use common::{ap03, head_tail, sim_batch, train, valid_gt};
 use model::person_minkunet::{HeadingEncoding, InputFeatures};
-use model::{Detector, PersonMinkUNet, PersonMinkUNetConfig};
+use model::{Detector, LossTerms, PersonMinkUNet, PersonMinkUNetConfig};
 use sparse_conv::burn::module::Module;
 use sparse_conv::burn::tensor::Device;
 
@@ -105,26 +105,31 @@ fn overfits_simulated_frames_and_checkpoint_round_trips() {
     let _ = std::fs::remove_file(path.with_extension("bpk"));
 }
 
+/// A small model with `heading` fitted for 150 steps on two simulated frames: its head's channel
+/// count, the loss terms' names, the last term before and after, and the sorted heading errors
+/// (degrees) of its decoded boxes against the frames' people.
+fn fit_heading(name: &str, heading: HeadingEncoding) -> (usize, Vec<&'static str>, f32, f32, Vec<f64>) {
+    let batch = sim_batch(name, 2, 16, 5.0, 11);
+    let device = Device::flex().autodiff();
+    let cfg = PersonMinkUNetConfig { cls_weight: 1.0, heading, ..small() };
+    let model = common::initialised(&device, Some(7), || cfg.init(&device));
+    let channels = model.coder().channels();
+    let last_term = |l: &LossTerms| l.terms.last().unwrap().1.to_data().try_to_vec::<f32>().unwrap()[0];
+    let first = model.loss(&batch, &device);
+    let (names, before) = (first.terms.iter().map(|(n, _)| *n).collect(), last_term(&first));
+    let (model, _) = train(model, &batch, &device, 150, 4e-3);
+    let after = last_term(&model.loss(&batch, &device));
+    let dets = model.valid().detect(&batch, &Device::flex());
+    (channels, names, before, after, common::heading_errors(&batch, &dets))
+}
+
 /// The heading as a sine and cosine (`heading = "sin_cos"`): a 9-channel head whose heading term
 /// is fitted on the training frames, and whose boxes decode the heading it learned.
 #[test]
 fn sin_cos_heading_is_fitted_and_decoded() {
-    let batch = sim_batch("pmu-sincos", 2, 16, 5.0, 11);
-    let device = Device::flex().autodiff();
-    let cfg = PersonMinkUNetConfig { cls_weight: 1.0, heading: HeadingEncoding::SinCos, ..small() };
-    let model = common::initialised(&device, Some(7), || cfg.init(&device));
-    assert_eq!(model.coder().channels(), 9);
-    let heading_term = |m: &PersonMinkUNet| {
-        let l = m.loss(&batch, &device);
-        assert_eq!(l.terms.iter().map(|(n, _)| *n).collect::<Vec<_>>(), ["cls", "loc", "dims", "heading"]);
-        l.terms[3].1.to_data().try_to_vec::<f32>().unwrap()[0]
-    };
-    let before = heading_term(&model);
-    let (model, _) = train(model, &batch, &device, 150, 4e-3);
-    let after = heading_term(&model);
-    let model = model.valid();
-    let dets = model.detect(&batch, &Device::flex());
-    let errors = common::heading_errors(&batch, &dets);
+    let (channels, names, before, after, errors) = fit_heading("pmu-sincos", HeadingEncoding::SinCos);
+    assert_eq!(channels, 9);
+    assert_eq!(names, ["cls", "loc", "dims", "heading"]);
     let median = errors[errors.len() / 2];
     eprintln!("sin/cos heading term {before:.3} → {after:.3}; median heading error {median:.1}° over {} people", errors.len());
     assert!(after < before / 4.0, "the heading term is fitted: {before} → {after}");
@@ -136,22 +141,9 @@ fn sin_cos_heading_is_fitted_and_decoded() {
 /// not only along the right axis.
 #[test]
 fn axis_and_facing_heading_is_fitted_and_decoded() {
-    let batch = sim_batch("pmu-facing", 2, 16, 5.0, 11);
-    let device = Device::flex().autodiff();
-    let cfg = PersonMinkUNetConfig { cls_weight: 1.0, heading: HeadingEncoding::AxisFacing, ..small() };
-    let model = common::initialised(&device, Some(7), || cfg.init(&device));
-    assert_eq!(model.coder().channels(), 32);
-    let facing_term = |m: &PersonMinkUNet| {
-        let l = m.loss(&batch, &device);
-        assert_eq!(l.terms.iter().map(|(n, _)| *n).collect::<Vec<_>>(), ["cls", "loc", "dims", "bin", "residual", "facing"]);
-        l.terms[5].1.to_data().try_to_vec::<f32>().unwrap()[0]
-    };
-    let before = facing_term(&model);
-    let (model, _) = train(model, &batch, &device, 150, 4e-3);
-    let after = facing_term(&model);
-    let model = model.valid();
-    let dets = model.detect(&batch, &Device::flex());
-    let errors = common::heading_errors(&batch, &dets);
+    let (channels, names, before, after, errors) = fit_heading("pmu-facing", HeadingEncoding::AxisFacing);
+    assert_eq!(channels, 32);
+    assert_eq!(names, ["cls", "loc", "dims", "bin", "residual", "facing"]);
     let right = errors.iter().filter(|&&e| e < 90.0).count() as f64 / errors.len() as f64;
     let median = errors[errors.len() / 2];
     eprintln!("facing term {before:.3} → {after:.3}; median heading error {median:.1}°, {:.0} % within 90° over {} people", 100.0 * right, errors.len());

@@ -9,7 +9,7 @@
 //! (`2·bins + 8` channels) the bins and residuals cover the heading's axis (0 to π) and `[7+2·bins]`
 //! is the facing logit: whether the person faces the sensor's side of that axis.
 
-use std::f64::consts::{FRAC_PI_2, PI, TAU};
+use std::f64::consts::{PI, TAU};
 
 use data_jrdb::Box3d;
 use serde::{Deserialize, Serialize};
@@ -23,16 +23,37 @@ pub const LOG_DIMS: usize = 4;
 /// First channel of the bin logits (`bins` channels; the residuals follow them).
 pub const BINS: usize = 7;
 
+/// Wraps an angle defined modulo `period` into (−period/2, period/2].
+fn wrap(a: f64, period: f64) -> f64 {
+    let half = period / 2.0;
+    let r = (a + half).rem_euclid(period) - half;
+    if r <= -half { r + period } else { r }
+}
+
 /// Wraps an angle into (−π, π].
 pub fn wrap_angle(a: f64) -> f64 {
-    let r = (a + PI).rem_euclid(TAU) - PI;
-    if r <= -PI { r + TAU } else { r }
+    wrap(a, TAU)
 }
 
 /// Wraps an axis angle (defined modulo π) into (−π/2, π/2].
 pub fn wrap_axis(a: f64) -> f64 {
-    let r = (a + FRAC_PI_2).rem_euclid(PI) - FRAC_PI_2;
-    if r <= -FRAC_PI_2 { r + PI } else { r }
+    wrap(a, PI)
+}
+
+/// Head channels for `num_bins` bins and `heading`: cls + offset + log-dims + bin logits +
+/// residuals = `2·bins + 7`, the same and the facing logit = `2·bins + 8`, or cls + offset +
+/// log-dims + sin + cos = 9.
+pub fn head_channels(num_bins: usize, heading: HeadingEncoding) -> usize {
+    match heading {
+        HeadingEncoding::Bins => 2 * num_bins + 7,
+        HeadingEncoding::AxisFacing => 2 * num_bins + 8,
+        HeadingEncoding::SinCos => 9,
+    }
+}
+
+/// Channel of the facing logit ([`HeadingEncoding::AxisFacing`]), after the bins' residuals.
+pub fn facing_channel(num_bins: usize) -> usize {
+    BINS + 2 * num_bins
 }
 
 /// Whether heading `rot_z` at (cx, cy) points within 90° of the sensor (the base frame's origin).
@@ -140,19 +161,9 @@ impl BoxCoder {
         Self { heading, ..self }
     }
 
-    /// Head channels: cls + offset + log-dims + bin logits + residuals = `2·bins + 7`, the same
-    /// and the facing logit = `2·bins + 8`, or cls + offset + log-dims + sin + cos = 9.
+    /// Head channels ([`head_channels`]).
     pub fn channels(&self) -> usize {
-        match self.heading {
-            HeadingEncoding::Bins => 2 * self.num_bins + 7,
-            HeadingEncoding::AxisFacing => 2 * self.num_bins + 8,
-            HeadingEncoding::SinCos => 9,
-        }
-    }
-
-    /// Channel of the facing logit ([`HeadingEncoding::AxisFacing`]).
-    pub fn facing_channel(&self) -> usize {
-        BINS + 2 * self.num_bins
+        head_channels(self.num_bins, self.heading)
     }
 
     /// The turn the bins cover: 2π for the heading, π for its axis.
@@ -183,15 +194,11 @@ impl BoxCoder {
             Some((c, s)) => ([c * dx + s * dy, c * dy - s * dx, dz], wrap_angle(b.rot_z - s.atan2(c))),
             None => ([dx, dy, dz], b.rot_z),
         };
-        let residual = |j: usize| match self.heading {
-            HeadingEncoding::AxisFacing => wrap_axis(theta - self.bin_centre(j)),
-            _ => wrap_angle(theta - self.bin_centre(j)),
-        };
         EncodedBox {
             offset,
             log_dims: [0, 1, 2].map(|k| (dims[k] / self.mean_size[k]).ln()),
             bin: self.bin_of(theta),
-            residuals: (0..self.num_bins).map(residual).collect(),
+            residuals: (0..self.num_bins).map(|j| wrap(theta - self.bin_centre(j), self.period())).collect(),
             faces_sensor: faces_sensor(b.cx, b.cy, b.rot_z),
             theta,
         }
@@ -238,7 +245,7 @@ impl BoxCoder {
         let offset = [f(OFFSET), f(OFFSET + 1), f(OFFSET + 2)];
         let log_dims = [f(LOG_DIMS), f(LOG_DIMS + 1), f(LOG_DIMS + 2)];
         let b = self.decode_parts(v, offset, log_dims, theta);
-        let faces = self.heading == HeadingEncoding::AxisFacing && row[self.facing_channel()] > 0.0;
+        let faces = self.heading == HeadingEncoding::AxisFacing && row[facing_channel(self.num_bins)] > 0.0;
         self.orient(b, faces)
     }
 
@@ -256,6 +263,7 @@ impl BoxCoder {
 mod tests {
     use super::*;
     use rand::{Rng, SeedableRng};
+    use std::f64::consts::FRAC_PI_2;
 
     #[test]
     fn encode_decode_round_trip_is_exact() {
@@ -288,9 +296,9 @@ mod tests {
         let mut row = vec![0f32; 32];
         row[BINS] = 5.0;
         row[BINS + 12] = e.residuals[0] as f32;
-        row[coder.facing_channel()] = 2.0;
+        row[facing_channel(12)] = 2.0;
         assert!((coder.decode_row(&row, v).rot_z.abs() - PI).abs() < 1e-6, "faces the sensor: θ = ±π");
-        row[coder.facing_channel()] = -2.0;
+        row[facing_channel(12)] = -2.0;
         assert!(coder.decode_row(&row, v).rot_z.abs() < 1e-6, "faces away: θ = 0");
         assert!((wrap_axis(PI) - 0.0).abs() < 1e-15 && (wrap_axis(-FRAC_PI_2) - FRAC_PI_2).abs() < 1e-15);
         // In the ray frame the axis is the observation angle's (α = θ − φ = π at v: axis 0), and
@@ -378,7 +386,7 @@ mod tests {
                         row[BINS + 12 + j] = *r as f32;
                     }
                     if coder.heading == HeadingEncoding::AxisFacing {
-                        row[coder.facing_channel()] = if e.faces_sensor { 3.0 } else { -3.0 };
+                        row[facing_channel(12)] = if e.faces_sensor { 3.0 } else { -3.0 };
                     }
                 }
                 // Any positive multiple of (sin, cos) is the same heading.

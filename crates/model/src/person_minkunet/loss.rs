@@ -6,7 +6,7 @@
 use sparse_conv::burn::tensor::activation::{log_sigmoid, log_softmax, relu};
 use sparse_conv::burn::tensor::{Device, Int, Tensor, TensorData};
 
-use super::box_coder::{BINS, CLS, HeadingEncoding, LOG_DIMS, OFFSET};
+use super::box_coder::{BINS, CLS, HeadingEncoding, LOG_DIMS, OFFSET, facing_channel, head_channels};
 use crate::detector::LossTerms;
 use super::targets::VoxelTargets;
 
@@ -60,11 +60,7 @@ fn floats<const D: usize>(v: &[f32], shape: [usize; D], device: &Device) -> Tens
 /// A batch without foreground voxels gives zero for the foreground terms (finite loss).
 pub fn loss(out: Tensor<2>, targets: &VoxelTargets, num_bins: usize, heading: HeadingEncoding, w: &LossWeights, device: &Device) -> LossTerms {
     let [m, c] = out.dims();
-    let want = match heading {
-        HeadingEncoding::Bins => 2 * num_bins + 7,
-        HeadingEncoding::AxisFacing => 2 * num_bins + 8,
-        HeadingEncoding::SinCos => 9,
-    };
+    let want = head_channels(num_bins, heading);
     assert_eq!(c, want, "head output has {c} channels, the layout needs {want}");
     assert_eq!(targets.cls.len(), m, "one classification target per voxel");
     let logits = out.clone().slice([0..m, CLS..CLS + 1]).reshape([m]);
@@ -94,7 +90,7 @@ pub fn loss(out: Tensor<2>, targets: &VoxelTargets, num_bins: usize, heading: He
                 let residual = mse(res_pred, floats(&targets.residuals, [f, num_bins], device));
                 terms.extend([bin * w.bin, residual * w.residual]);
                 if heading == HeadingEncoding::AxisFacing {
-                    let at = BINS + 2 * num_bins;
+                    let at = facing_channel(num_bins);
                     let logit = rows.slice([0..f, at..at + 1]).reshape([f]);
                     let facing = bce_with_logits(logit, floats(&targets.facing, [f], device)).mean();
                     terms.push(facing * w.facing);

@@ -26,6 +26,7 @@ use sparse_conv::burn::nn::{Linear, LinearConfig};
 use sparse_conv::burn::tensor::{Device, Tensor, TensorData};
 
 use crate::detector::{Detections, Detector, LossTerms};
+use box_coder::head_channels;
 use decode::decode;
 use loss::{LossWeights, loss};
 use targets::assign;
@@ -46,7 +47,7 @@ impl PersonMinkUNet {
     /// A model with fresh parameters (spec §1.6 initialisation).
     pub fn new(config: &PersonMinkUNetConfig, device: &Device) -> Self {
         let backbone_cfg = config.backbone();
-        let channels = BoxCoder::new(config.mean_size, config.num_bins).with_heading(config.heading).channels();
+        let channels = head_channels(config.num_bins, config.heading);
         PersonMinkUNet {
             backbone: backbone_cfg.init(device),
             head: LinearConfig::new(backbone_cfg.out_channels(), channels).init(device),
