@@ -17,19 +17,21 @@ pub struct SampleConfig {
     pub augment: Option<AugmentConfig>,
     /// Voxel cap (30,000 in training), `None` at evaluation.
     pub max_voxels: Option<usize>,
+    /// Keep the frame's points in the sample (evaluation): what a second stage reads in a box.
+    pub keep_points: bool,
 }
 
 impl Default for SampleConfig {
     /// The training settings of the paper.
     fn default() -> Self {
-        Self { voxel: VoxelConfig::default(), augment: Some(AugmentConfig::default()), max_voxels: Some(30_000) }
+        Self { voxel: VoxelConfig::default(), augment: Some(AugmentConfig::default()), max_voxels: Some(30_000), keep_points: false }
     }
 }
 
 impl SampleConfig {
-    /// Evaluation settings: no augmentation, no cap.
+    /// Evaluation settings: no augmentation, no cap, the points kept.
     pub fn eval() -> Self {
-        Self { voxel: VoxelConfig::default(), augment: None, max_voxels: None }
+        Self { voxel: VoxelConfig::default(), augment: None, max_voxels: None, keep_points: true }
     }
 }
 
@@ -48,6 +50,8 @@ pub struct Sample {
     pub num_points: Vec<i64>,
     /// Points in the frame before voxelization.
     pub n_points: usize,
+    /// The (augmented) points themselves when [`SampleConfig::keep_points`], else empty.
+    pub points: Vec<[f32; 3]>,
     /// The transform applied, if any.
     pub augmentation: Option<Augmentation>,
 }
@@ -71,6 +75,7 @@ pub fn prepare<R: Rng + ?Sized>(mut frame: Frame, cfg: &SampleConfig, rng: &mut 
         boxes: frame.boxes,
         num_points: frame.num_points,
         n_points: frame.points.len(),
+        points: if cfg.keep_points { frame.points } else { Vec::new() },
         augmentation,
     }
 }
@@ -94,6 +99,8 @@ pub struct Batch {
     pub frames: Vec<(String, String)>,
     /// Voxel size used, metres.
     pub voxel_size: [f32; 3],
+    /// Each sample's points before voxelization (empty unless kept: evaluation samples).
+    pub clouds: Vec<Vec<[f32; 3]>>,
 }
 
 impl Batch {
@@ -154,6 +161,7 @@ pub fn collate(samples: Vec<Sample>, voxel_size: [f32; 3]) -> Batch {
         b.boxes.push(s.boxes);
         b.num_points.push(s.num_points);
         b.frames.push((s.sequence, s.name));
+        b.clouds.push(s.points);
     }
     b
 }

@@ -71,12 +71,13 @@ impl DataConfig {
             voxel: VoxelConfig { voxel_size: self.voxel_size, pooling: self.pooling },
             augment: self.augment.enabled.then_some(AugmentConfig { scale: self.augment.scale, rotate: self.augment.rotate }),
             max_voxels: self.max_voxels.filter(|&m| m > 0),
+            keep_points: false,
         }
     }
 
-    /// Per-frame processing at evaluation: no augmentation, no cap.
+    /// Per-frame processing at evaluation: no augmentation, no cap, the points kept.
     pub fn eval_sample(&self) -> SampleConfig {
-        SampleConfig { voxel: VoxelConfig { voxel_size: self.voxel_size, pooling: self.pooling }, augment: None, max_voxels: None }
+        SampleConfig { voxel: VoxelConfig { voxel_size: self.voxel_size, pooling: self.pooling }, augment: None, max_voxels: None, keep_points: true }
     }
 
     /// What opening `split` of the tree needs: the validation sequences, labels required,

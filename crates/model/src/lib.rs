@@ -10,6 +10,8 @@
 //! - [`centerpoint`]: the dense baseline, laid out the same way (encoder, grid, backbone, head,
 //!   targets, loss, decoding, config).
 //! - [`post`]: score threshold, NMS, box voting and caps, shared by both.
+//! - [`facing`]: the second stage that turns a box's heading to the direction the points in it
+//!   show (fitted per run; IoU does not see the direction, so AP does not change).
 //!
 //! A trained model on point clouds of your own: `train::RunDetector` loads a run folder (config
 //! and checkpoint) once and detects in `[x, y, z]` arrays (`crates/train/examples/detect_points.rs`);
@@ -23,6 +25,8 @@ pub mod centerpoint;
 pub mod config;
 /// The interface both detectors implement.
 pub mod detector;
+/// Which way a detected person faces, read from the points in the box.
+pub mod facing;
 /// Person-MinkUNet.
 pub mod person_minkunet;
 /// Post-processing shared by both models.
@@ -31,5 +35,6 @@ pub mod post;
 pub use centerpoint::{CenterPoint, CenterPointConfig};
 pub use config::ModelConfig;
 pub use detector::{Detections, Detector, LossTerms};
+pub use facing::{FacingClassifier, FacingFeatures, FacingSample};
 pub use person_minkunet::{BoxCoder, BoxFrame, MinkUNet, MinkUNetConfig, PersonMinkUNet, PersonMinkUNetConfig, TargetVariant, UNetLevels};
 pub use post::{NmsKind, PostProcessConfig};

@@ -61,6 +61,11 @@ pub struct PostProcessConfig {
     /// offsets fall short of the centre along the line of sight by a few centimetres whatever
     /// the range (docs/recipe.md §6): a calibration, measured on frames that are not scored.
     pub radial_shift: f64,
+    /// Turn each kept box's heading to the direction the points in it show, with the facing
+    /// stage fitted for the checkpoint (`facing.json` beside its weights, `train facing`), when it
+    /// has one; the box, its axis and its score are unchanged, so AP is too. Applied where a run's
+    /// model is loaded for inference (`infer`, `detect`, `serve`), not in training's validation.
+    pub facing_stage: bool,
 }
 
 impl Default for PostProcessConfig {
@@ -78,6 +83,7 @@ impl Default for PostProcessConfig {
             merge_heading: true,
             merge_power: 1.0,
             radial_shift: 0.0,
+            facing_stage: true,
         }
     }
 }

@@ -14,12 +14,8 @@ use crate::backend::BackendKind;
 use crate::checkpoint::Slot;
 use crate::infer::detect_run_split;
 use crate::run_dir::{RunDir, write_atomic};
-use crate::validate::FrameResult;
+use crate::validate::{FrameResult, MATCH_MIN_SCORE, MATCH_RADIUS, matched_by_centre};
 
-/// Detections scoring below this are not matched (the confident ones are the ones that count).
-pub const MIN_SCORE: f64 = 0.3;
-/// A detection matches the nearest unmatched valid person whose centre is this close in BEV (m).
-pub const MATCH_RADIUS: f64 = 0.5;
 /// Fewer matches than this are too few to calibrate from.
 pub const MIN_MATCHES: usize = 100;
 /// The range bands the measurement is reported in (metres, BEV).
@@ -76,26 +72,11 @@ impl std::fmt::Display for RadialBias {
     }
 }
 
-/// `(range, error along the ray)` of every detection scoring at least [`MIN_SCORE`] matched,
-/// best first, to the nearest unmatched person within [`MATCH_RADIUS`] in BEV, among the people
-/// the protocol scores (enough points, within its range).
+/// `(range, error along the ray)` of every pair [`matched_by_centre`] makes.
 pub fn radial_errors(frames: &[FrameResult], protocol: &Protocol) -> Vec<(f64, f64)> {
     let mut out = Vec::new();
     for f in frames {
-        let valid = f.scored_gt(protocol);
-        let mut taken = vec![false; valid.len()];
-        // Detections are best first.
-        for d in f.detections.iter().take_while(|d| d.score >= MIN_SCORE) {
-            let nearest = valid
-                .iter()
-                .enumerate()
-                .filter(|(i, _)| !taken[*i])
-                .map(|(i, g)| (i, (d.bbox.cx - g.cx).hypot(d.bbox.cy - g.cy)))
-                .filter(|(_, dist)| *dist < MATCH_RADIUS)
-                .min_by(|a, b| a.1.total_cmp(&b.1));
-            let Some((i, _)) = nearest else { continue };
-            taken[i] = true;
-            let g = valid[i];
+        for (d, g) in matched_by_centre(f, protocol) {
             let r = g.bev_range();
             if r > 0.0 {
                 out.push((r, ((d.bbox.cx - g.cx) * g.cx + (d.bbox.cy - g.cy) * g.cy) / r));
@@ -132,7 +113,7 @@ pub fn calibrate(run: &RunDir, opts: &CalibrateOptions) -> Result<RadialBias> {
     let errors = radial_errors(&frames, &cfg.eval.protocol());
     ensure!(
         errors.len() >= MIN_MATCHES,
-        "{} frames of {} gave {} matched people (score ≥ {MIN_SCORE}, centre within {MATCH_RADIUS} m), fewer than the {MIN_MATCHES} a calibration needs",
+        "{} frames of {} gave {} matched people (score ≥ {MATCH_MIN_SCORE}, centre within {MATCH_RADIUS} m), fewer than the {MIN_MATCHES} a calibration needs",
         frames.len(),
         cfg.data.root.display(),
         errors.len()

@@ -19,12 +19,13 @@ use anyhow::{Context, Result};
 use burn::module::Module;
 use burn::tensor::Device;
 use data_jrdb::{Batch, Frame, collate, prepare};
-use model::{CenterPoint, Detections, Detector, ModelConfig, PersonMinkUNet};
+use model::{CenterPoint, Detections, Detector, FacingClassifier, ModelConfig, PersonMinkUNet};
 use rand::SeedableRng;
 
 use crate::backend::{BackendKind, init_threads};
 use crate::checkpoint::{Checkpoints, Slot};
 use crate::config::RunConfig;
+use crate::facing::load_facing;
 use crate::run_dir::RunDir;
 
 /// Either trained model, in inference mode.
@@ -33,12 +34,14 @@ enum Model {
     Centerpoint(CenterPoint),
 }
 
-/// A run's model with its weights, its voxelization and its post-processing, on one device.
+/// A run's model with its weights, its voxelization and its post-processing (the checkpoint's
+/// facing stage included), on one device.
 pub struct RunDetector {
     model: Model,
     config: RunConfig,
     device: Device,
     checkpoint: PathBuf,
+    facing: Option<FacingClassifier>,
 }
 
 impl RunDetector {
@@ -65,7 +68,8 @@ impl RunDetector {
             ModelConfig::PersonMinkunet(c) => Model::PersonMinkunet(files.load_model(c.init(&device))?.valid()),
             ModelConfig::Centerpoint(c) => Model::Centerpoint(files.load_model(c.init(&device))?.valid()),
         };
-        Ok(Self { model, config, device, checkpoint: files.dir })
+        let facing = if config.model.post().facing_stage { load_facing(&files.dir)? } else { None };
+        Ok(Self { model, config, device, checkpoint: files.dir, facing })
     }
 
     /// The resolved config the detector runs with.
@@ -76,6 +80,12 @@ impl RunDetector {
     /// The checkpoint folder its weights came from.
     pub fn checkpoint(&self) -> &Path {
         &self.checkpoint
+    }
+
+    /// The facing stage it applies (the checkpoint's `facing.json`, unless
+    /// `model.post.facing_stage` is off).
+    pub fn facing(&self) -> Option<&FacingClassifier> {
+        self.facing.as_ref()
     }
 
     /// The device it runs on.
@@ -106,9 +116,15 @@ impl RunDetector {
     ///
     /// [`DataConfig::eval_sample`]: data_jrdb::DataConfig::eval_sample
     pub fn detect_batch(&self, batch: &Batch) -> Vec<Detections> {
-        match &self.model {
+        let mut found = match &self.model {
             Model::PersonMinkunet(m) => m.detect(batch, &self.device),
             Model::Centerpoint(m) => m.detect(batch, &self.device),
+        };
+        if let Some(stage) = &self.facing {
+            for (d, cloud) in found.iter_mut().zip(&batch.clouds) {
+                d.boxes.iter_mut().for_each(|b| *b = stage.orient(cloud, b));
+            }
         }
+        found
     }
 }

@@ -124,10 +124,12 @@ pub fn infer(run: &RunDir, opts: &InferOptions) -> Result<InferOutput> {
             .collect();
         obj.insert("ap3d_by_range_non_official".into(), serde_json::Value::Object(bands));
         obj.insert("heading".into(), json!(heading));
+        obj.insert("facing_stage".into(), json!(detector.facing().is_some()));
         obj.insert("overrides".into(), json!(opts.set));
     }
     std::fs::write(dir.join("eval.json"), serde_json::to_string_pretty(&eval_json)?)?;
-    let heading_text = heading.map_or_else(|| "no matched box".to_string(), |h| h.to_string());
+    let stage = if detector.facing().is_some() { " (directions from the checkpoint's facing stage)" } else { "" };
+    let heading_text = heading.map_or_else(|| "no matched box".to_string(), |h| format!("{h}{stage}"));
     let table = format!("{}\nAP3D by range (non-official): {}\n{heading_text}\n", report.to_table().trim_end(), format_by_range(&by_range));
     std::fs::write(dir.join("eval.txt"), &table)?;
     if opts.render > 0 {

@@ -8,7 +8,8 @@
 //!   [`checkpoint`] (atomic best/latest, resume), [`metrics`] (CSV), [`plots`] (PNG), [`progress`];
 //! - after a run: [`detector`] ([`RunDetector`]: a run's model on point clouds), [`infer`]
 //!   (detection files, official layout, scores), [`calibrate`] (the radial shift of
-//!   post-processing, measured on frames not scored), [`render`] (BEV PNGs);
+//!   post-processing, measured on frames not scored), [`facing`] (the checkpoint's facing stage,
+//!   fitted on frames not scored), [`render`] (BEV PNGs);
 //! - on the user's own clouds: [`sensor_pose`] (their frame in JRDB's), [`detect`] (files,
 //!   folders, trees → JSON, KITTI txt, PNG), [`serve`] (the same over HTTP);
 //! - many runs: [`sweep`].
@@ -31,6 +32,8 @@ pub mod data;
 pub mod detector;
 /// People in point-cloud files, folders and trees.
 pub mod detect;
+/// The facing stage of a checkpoint, fitted on its own boxes.
+pub mod facing;
 /// Detection files and scores from a checkpoint.
 pub mod infer;
 /// CSV curves.
@@ -62,6 +65,7 @@ pub use checkpoint::{Checkpoints, Slot, TrainState};
 pub use config::RunConfig;
 pub use detect::{BoxRecord, DetectOptions, FrameReport};
 pub use detector::RunDetector;
+pub use facing::{FacingOptions, FacingReport, FitBoxes, fit_facing};
 pub use infer::{InferOptions, InferOutput, infer};
 pub use run_dir::{Existing, RunDir};
 pub use schedule::Schedule;

@@ -15,7 +15,8 @@ use std::process::ExitCode;
 use anyhow::{Context, Result, bail};
 use clap::{Args, Parser, Subcommand};
 use data_jrdb::Split;
-use train::{BackendKind, CalibrateOptions, DetectOptions, Existing, InferOptions, RunConfig, RunDetector, RunDir, SensorPose, ServeOptions, Slot, SweepConfig, TrainOptions};
+use model::FacingFeatures;
+use train::{BackendKind, CalibrateOptions, DetectOptions, Existing, FacingOptions, FitBoxes, InferOptions, RunConfig, RunDetector, RunDir, SensorPose, ServeOptions, Slot, SweepConfig, TrainOptions};
 
 /// The weights `detect` and `serve` use unless told otherwise (relative to the working directory,
 /// which is the repository's root under `cargo run`).
@@ -152,6 +153,45 @@ enum Cmd {
         #[arg(long)]
         write: bool,
     },
+    /// Fit the checkpoint's facing stage (which way each box's person faces, read from the
+    /// points in it) on the run's own boxes over the training split, report the direction before
+    /// and after it on the validation split and, with --write, store it beside the checkpoint
+    /// (CHECKPOINT/facing.json), where infer, detect and serve apply it.
+    Facing {
+        /// The run folder.
+        #[arg(long)]
+        run: PathBuf,
+        /// Split to fit on (default: the training split; or another tree's, with --data-root).
+        #[arg(long, value_enum, default_value = "train")]
+        split: SplitArg,
+        /// Split to report the direction on (default: val).
+        #[arg(long, value_enum, default_value = "val")]
+        score_on: SplitArg,
+        /// Checkpoint (default: latest).
+        #[arg(long, value_enum)]
+        checkpoint: Option<SlotArg>,
+        /// Backend (overrides the run's).
+        #[arg(long, value_enum)]
+        backend: Option<BackendKind>,
+        /// Fit and report on this JRDB-format tree instead of the run's own data.
+        #[arg(long, value_name = "DIR")]
+        data_root: Option<PathBuf>,
+        /// Learn from the run's matched detections (the boxes it is applied to) or the labels.
+        #[arg(long, value_enum, default_value = "detections")]
+        boxes: FitBoxes,
+        /// Histogram cell size (m), 0.15 to 0.6.
+        #[arg(long, default_value_t = 0.2)]
+        cell: f64,
+        /// Also the three 2D projections at this finer cell (m), 0.08 to 0.6.
+        #[arg(long)]
+        profile_cell: Option<f64>,
+        /// Ridge weight on the standardised features.
+        #[arg(long, default_value_t = 0.01)]
+        l2: f64,
+        /// Store the stage beside the checkpoint (default: only report).
+        #[arg(long)]
+        write: bool,
+    },
     /// Detect people in point-cloud files (PCD, KITTI .bin, .npy), folders of them, glob patterns
     /// or JRDB-format trees; write OUT/json/NAME.json, OUT/kitti/NAME.txt and with --render
     /// OUT/render/NAME.png per frame.
@@ -257,7 +297,7 @@ fn pin(backend: BackendKind) {
 }
 
 fn run_train(a: TrainArgs) -> Result<()> {
-    let Some(path) = a.config else { bail!("--config FILE is required (or a subcommand: infer, sweep, detect, serve); see --help") };
+    let Some(path) = a.config else { bail!("--config FILE is required (or a subcommand: infer, calibrate, facing, sweep, detect, serve); see --help") };
     let mut cfg = RunConfig::load(&path, &a.set)?;
     if let Some(b) = a.backend {
         cfg.backend = b;
@@ -309,6 +349,30 @@ fn main() -> ExitCode {
             let out = train::infer(&dir, &InferOptions { split, checkpoint, render, backend, verbose: true, data_root, set, out })?;
             println!("{}", out.table);
             println!("{} frames; detections and scores in {}", out.frames, out.dir.display());
+            Ok(())
+        })(),
+        Some(Cmd::Facing { run, split, score_on, checkpoint, backend, data_root, boxes, cell, profile_cell, l2, write }) => (|| -> Result<()> {
+            let dir = RunDir::at(&run);
+            pin(backend.unwrap_or(dir.config()?.backend));
+            anyhow::ensure!((0.15..=0.6).contains(&cell), "--cell {cell} must lie in [0.15, 0.6] m (finer grids have too many cells for the fit)");
+            anyhow::ensure!(l2 >= 0.0 && l2.is_finite(), "--l2 {l2} must be a finite non-negative number");
+            if let Some(c) = profile_cell {
+                anyhow::ensure!((0.08..=0.6).contains(&c), "--profile-cell {c} must lie in [0.08, 0.6] m");
+            }
+            let features = FacingFeatures { cell, profile_cell, ..Default::default() };
+            let opts = FacingOptions {
+                split: split.into(),
+                score_on: Some(score_on.into()),
+                checkpoint: checkpoint.map(Slot::from),
+                backend,
+                data_root,
+                boxes,
+                features,
+                l2,
+                write,
+                verbose: true,
+            };
+            println!("{}", train::fit_facing(&dir, &opts)?);
             Ok(())
         })(),
         Some(Cmd::Calibrate { run, split, checkpoint, backend, data_root, write }) => (|| -> Result<()> {

@@ -141,8 +141,21 @@ pub struct Validation {
 /// Runs `detect` (a model in eval mode on a plain device, or a [`crate::RunDetector`]) over every
 /// batch of `loader`'s epoch 0.
 pub fn detect_split(detect: impl Fn(&Batch) -> Vec<Detections>, loader: &Loader, show_progress: bool) -> Result<Vec<FrameResult>> {
-    let pb = if show_progress { progress::bar(loader.dataset().len() as u64, "detect") } else { ProgressBar::hidden() };
     let mut out = Vec::with_capacity(loader.dataset().len());
+    visit_split(detect, loader, show_progress, |frame, _| out.push(frame))?;
+    Ok(out)
+}
+
+/// As [`detect_split`], handing each frame's result to `visit` with the frame's points (empty
+/// unless the loader keeps them, as evaluation loaders do) instead of collecting the results:
+/// for what needs the points and cannot hold a whole split's.
+pub fn visit_split(
+    detect: impl Fn(&Batch) -> Vec<Detections>,
+    loader: &Loader,
+    show_progress: bool,
+    mut visit: impl FnMut(FrameResult, &[[f32; 3]]),
+) -> Result<()> {
+    let pb = if show_progress { progress::bar(loader.dataset().len() as u64, "detect") } else { ProgressBar::hidden() };
     for batch in loader.epoch(0) {
         let batch = batch?;
         let dets = detect(&batch);
@@ -150,12 +163,45 @@ pub fn detect_split(detect: impl Fn(&Batch) -> Vec<Detections>, loader: &Loader,
         for (b, d) in dets.into_iter().enumerate() {
             let (sequence, name) = batch.frames[b].clone();
             let detections = d.boxes.iter().zip(&d.scores).map(|(bb, &s)| Detection { bbox: *bb, score: s as f64 }).collect();
-            out.push(FrameResult { sequence, name, gt: batch.boxes[b].clone(), num_points: batch.num_points[b].clone(), detections });
+            let frame = FrameResult { sequence, name, gt: batch.boxes[b].clone(), num_points: batch.num_points[b].clone(), detections };
+            visit(frame, batch.clouds.get(b).map_or(&[][..], Vec::as_slice));
         }
         pb.inc(batch.len() as u64);
     }
     pb.finish_and_clear();
-    Ok(out)
+    Ok(())
+}
+
+/// Detections scoring below this are not matched by [`matched_by_centre`] (the confident ones
+/// are the ones that count).
+pub const MATCH_MIN_SCORE: f64 = 0.3;
+/// [`matched_by_centre`] pairs a detection with the nearest unmatched person whose centre is this
+/// close in BEV (m).
+pub const MATCH_RADIUS: f64 = 0.5;
+
+/// `(detection, person)` pairs of one frame: each detection scoring at least
+/// [`MATCH_MIN_SCORE`], best first, takes the nearest unmatched person within [`MATCH_RADIUS`]
+/// in BEV among those `protocol` scores (enough points, within its range). By centre, not IoU:
+/// what is measured on the pairs (a centre's error, a direction) must not decide who is paired.
+pub fn matched_by_centre<'a>(f: &'a FrameResult, protocol: &Protocol) -> Vec<(&'a Detection, &'a Box3d)> {
+    let valid = f.scored_gt(protocol);
+    let mut taken = vec![false; valid.len()];
+    let mut out = Vec::new();
+    // Detections are best first.
+    for d in f.detections.iter().take_while(|d| d.score >= MATCH_MIN_SCORE) {
+        let nearest = valid
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| !taken[*i])
+            .map(|(i, g)| (i, (d.bbox.cx - g.cx).hypot(d.bbox.cy - g.cy)))
+            .filter(|(_, dist)| *dist < MATCH_RADIUS)
+            .min_by(|a, b| a.1.total_cmp(&b.1));
+        if let Some((i, _)) = nearest {
+            taken[i] = true;
+            out.push((d, valid[i]));
+        }
+    }
+    out
 }
 
 /// The evaluator's frames of `frames`.

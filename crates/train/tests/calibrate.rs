@@ -4,30 +4,12 @@
 //! hand in `calibrate.rs`; on seed 7's training split it gives `tools/centre_errors.py`'s 19,635
 //! matches and −0.073 m.)
 
-use std::path::Path;
-
 use data_jrdb::Split;
 use data_jrdb::sim::{SynthConfig, synth};
-use train::{CalibrateOptions, RunDir, calibrate};
+use train::{CalibrateOptions, calibrate};
 
-/// The shipped run's config and checkpoints, copied to `dir`.
-fn shipped_copy(dir: &Path) -> RunDir {
-    fn copy_tree(from: &Path, to: &Path) {
-        std::fs::create_dir_all(to).unwrap();
-        for e in std::fs::read_dir(from).unwrap() {
-            let e = e.unwrap();
-            if e.file_type().unwrap().is_dir() {
-                copy_tree(&e.path(), &to.join(e.file_name()));
-            } else {
-                std::fs::copy(e.path(), to.join(e.file_name())).unwrap();
-            }
-        }
-    }
-    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../weights/person_minkunet");
-    copy_tree(&src.join("checkpoints"), &dir.join("checkpoints"));
-    std::fs::copy(src.join("config.toml"), dir.join("config.toml")).unwrap();
-    RunDir::at(dir)
-}
+mod common;
+use common::shipped_copy;
 
 #[test]
 fn measures_the_bias_and_writes_only_the_shift() {

@@ -1,0 +1,167 @@
+//! The facing stage: an occupancy histogram in the box's frame, read by a logistic regression.
+
+use std::f64::consts::PI;
+
+use data_jrdb::Box3d;
+use serde::{Deserialize, Serialize};
+
+use super::features::{FacingFeatures, axis_sign, faces_along_axis};
+use super::logistic::LogisticRegression;
+use crate::person_minkunet::box_coder::wrap_angle;
+
+/// One box to learn from: its histogram and whether the true heading points along its signed
+/// axis.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FacingSample {
+    /// [`FacingFeatures::histogram`] of the box.
+    pub features: Vec<f64>,
+    /// Whether the person faces the sensor's side of the box's axis.
+    pub faces: bool,
+}
+
+impl FacingSample {
+    /// The sample of box `b` (a detection, or a label) over `points`, with the person's true
+    /// heading `true_rot_z`; `None` when too few points are inside.
+    pub fn new(features: &FacingFeatures, points: &[[f32; 3]], b: &Box3d, true_rot_z: f64) -> Option<Self> {
+        Some(Self { features: features.histogram(points, b)?, faces: faces_along_axis(b, true_rot_z) })
+    }
+}
+
+/// A fitted facing stage, as a run stores it.
+#[derive(Serialize, Deserialize, Debug, Clone, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct FacingClassifier {
+    /// What is read in a box.
+    pub features: FacingFeatures,
+    /// How it is read.
+    pub regression: LogisticRegression,
+    /// The ridge weight it was fitted with.
+    pub l2: f64,
+    /// Boxes it was fitted on.
+    pub samples: usize,
+    /// Share of those it tells right.
+    pub training_accuracy: f64,
+}
+
+impl FacingClassifier {
+    /// Fits the stage on `samples` (histograms of `features`) with ridge `l2`.
+    pub fn fit(features: FacingFeatures, samples: &[FacingSample], l2: f64) -> Result<Self, String> {
+        if samples.is_empty() {
+            return Err("no box to fit the facing stage on".into());
+        }
+        if let Some(s) = samples.iter().find(|s| s.features.len() != features.len()) {
+            return Err(format!("a sample has {} features where the histogram has {}", s.features.len(), features.len()));
+        }
+        let xs: Vec<Vec<f64>> = samples.iter().map(|s| s.features.clone()).collect();
+        let ys: Vec<bool> = samples.iter().map(|s| s.faces).collect();
+        let regression = LogisticRegression::fit(&xs, &ys, l2);
+        let right = xs.iter().zip(&ys).filter(|(x, y)| (regression.probability(x) > 0.5) == **y).count();
+        Ok(Self { features, regression, l2, samples: samples.len(), training_accuracy: right as f64 / samples.len() as f64 })
+    }
+
+    /// Whether a stored stage is whole: as many weights, means and scales as the histogram has
+    /// cells, all finite.
+    pub fn check(&self) -> Result<(), String> {
+        let r = &self.regression;
+        let n = self.features.len();
+        if n == 0 || [r.weights.len(), r.mean.len(), r.scale.len()].iter().any(|&k| k != n) {
+            return Err(format!(
+                "the histogram has {n} cells but the regression {} weights, {} means, {} scales",
+                r.weights.len(),
+                r.mean.len(),
+                r.scale.len()
+            ));
+        }
+        let finite = r.weights.iter().chain(&r.mean).all(|v| v.is_finite()) && r.scale.iter().all(|s| s.is_finite() && *s > 0.0) && r.bias.is_finite();
+        if !finite {
+            return Err("the regression holds a non-finite value or a non-positive scale".into());
+        }
+        Ok(())
+    }
+
+    /// The probability that the person in `b` faces the sensor's side of its axis; `None` when
+    /// too few of `points` are inside.
+    pub fn probability(&self, points: &[[f32; 3]], b: &Box3d) -> Option<f64> {
+        Some(self.regression.probability(&self.features.histogram(points, b)?))
+    }
+
+    /// `b` with its heading turned to the side the stage reads (box, axis and score unchanged);
+    /// as it was when too few points are inside.
+    pub fn orient(&self, points: &[[f32; 3]], b: &Box3d) -> Box3d {
+        let Some(p) = self.probability(points, b) else { return *b };
+        let along = axis_sign(b) > 0.0;
+        if along == (p > 0.5) { *b } else { Box3d { rot_z: wrap_angle(b.rot_z + PI), ..*b } }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A person at (cx, cy) facing `rot_z`: a torso column and feet reaching forward, the cue
+    /// the stage has to find.
+    fn person_points(cx: f64, cy: f64, rot_z: f64) -> Vec<[f32; 3]> {
+        let (s, c) = rot_z.sin_cos();
+        let mut pts = Vec::new();
+        for k in 0..30 {
+            let (u, v) = (0.02 * (k % 5) as f64 - 0.04, 0.05 * (k % 6) as f64 - 0.12);
+            pts.push([cx + c * u - s * v, cy + s * u + c * v, -0.2 + 0.04 * k as f64]);
+        }
+        for k in 0..6 {
+            let (u, v) = (0.25, 0.06 * k as f64 - 0.15);
+            pts.push([cx + c * u - s * v, cy + s * u + c * v, -0.68]);
+        }
+        pts.iter().map(|p| p.map(|v| v as f32)).collect()
+    }
+
+    fn box_at(cx: f64, cy: f64, rot_z: f64) -> Box3d {
+        Box3d { cx, cy, cz: 0.15, l: 0.7, w: 0.6, h: 1.7, rot_z }
+    }
+
+    #[test]
+    fn learns_feet_forward_and_orients_boxes_of_either_direction() {
+        let f = FacingFeatures::default();
+        let mut samples = Vec::new();
+        for i in 0..80 {
+            let (azimuth, heading) = (0.3 * i as f64, 0.77 * i as f64);
+            let (cx, cy) = (6.0 * azimuth.cos(), 6.0 * azimuth.sin());
+            // The box's heading is the axis only: half of them point the wrong way.
+            let det = box_at(cx, cy, if i % 2 == 0 { heading } else { heading + PI });
+            samples.push(FacingSample::new(&f, &person_points(cx, cy, heading), &det, heading).unwrap());
+        }
+        assert!(samples.iter().any(|s| s.faces) && samples.iter().any(|s| !s.faces));
+        let stage = FacingClassifier::fit(f, &samples, 1e-2).unwrap();
+        stage.check().unwrap();
+        assert_eq!(stage.training_accuracy, 1.0);
+        // People it never saw, boxes flipped or not: each turned to within 90° of the truth.
+        for i in 0..20 {
+            let (azimuth, heading) = (0.5 + 0.41 * i as f64, -1.0 + 0.53 * i as f64);
+            let (cx, cy) = (9.0 * azimuth.cos(), 9.0 * azimuth.sin());
+            for flip in [0.0, PI] {
+                let b = stage.orient(&person_points(cx, cy, heading), &box_at(cx, cy, heading + flip));
+                assert!(wrap_angle(b.rot_z - heading).abs() < 1e-9, "person {i}, flip {flip}: {} vs {heading}", b.rot_z);
+            }
+        }
+        // No points: the box is left as it was.
+        let b = box_at(3.0, 0.0, 1.0);
+        assert_eq!(stage.orient(&[], &b), b);
+    }
+
+    #[test]
+    fn a_damaged_stage_is_refused() {
+        let f = FacingFeatures::default();
+        let mut stage = FacingClassifier {
+            features: f,
+            regression: LogisticRegression { mean: vec![0.0; f.len()], scale: vec![1.0; f.len()], weights: vec![0.0; f.len()], bias: 0.0 },
+            l2: 0.01,
+            samples: 1,
+            training_accuracy: 1.0,
+        };
+        stage.check().unwrap();
+        stage.regression.weights.pop();
+        assert!(stage.check().unwrap_err().contains("359 weights"));
+        stage.regression.weights.push(f64::NAN);
+        assert!(stage.check().is_err());
+        assert!(FacingClassifier::fit(f, &[], 0.01).is_err());
+    }
+}
