@@ -179,12 +179,15 @@ enum Cmd {
         /// Learn from the run's matched detections (the boxes it is applied to) or the labels.
         #[arg(long, value_enum, default_value = "detections")]
         boxes: FitBoxes,
-        /// Histogram cell size (m), 0.15 to 0.6.
-        #[arg(long, default_value_t = 0.2)]
+        /// Cell size (m) of the 3D occupancy histogram, 0.15 to 0.6.
+        #[arg(long, default_value_t = 0.15)]
         cell: f64,
-        /// Also the three 2D projections at this finer cell (m), 0.08 to 0.6.
+        /// Cell size (m) of the three 2D projections read beside it, 0.08 to 0.6; 0: none.
+        #[arg(long, default_value_t = 0.1)]
+        profile_cell: f64,
+        /// Read the points only, not the detector's own direction.
         #[arg(long)]
-        profile_cell: Option<f64>,
+        no_detector_direction: bool,
         /// Ridge weight on the standardised features.
         #[arg(long, default_value_t = 0.01)]
         l2: f64,
@@ -351,15 +354,16 @@ fn main() -> ExitCode {
             println!("{} frames; detections and scores in {}", out.frames, out.dir.display());
             Ok(())
         })(),
-        Some(Cmd::Facing { run, split, score_on, checkpoint, backend, data_root, boxes, cell, profile_cell, l2, write }) => (|| -> Result<()> {
+        Some(Cmd::Facing { run, split, score_on, checkpoint, backend, data_root, boxes, cell, profile_cell, no_detector_direction, l2, write }) => (|| -> Result<()> {
             let dir = RunDir::at(&run);
             pin(backend.unwrap_or(dir.config()?.backend));
             anyhow::ensure!((0.15..=0.6).contains(&cell), "--cell {cell} must lie in [0.15, 0.6] m (finer grids have too many cells for the fit)");
             anyhow::ensure!(l2 >= 0.0 && l2.is_finite(), "--l2 {l2} must be a finite non-negative number");
+            let profile_cell = (profile_cell != 0.0).then_some(profile_cell);
             if let Some(c) = profile_cell {
-                anyhow::ensure!((0.08..=0.6).contains(&c), "--profile-cell {c} must lie in [0.08, 0.6] m");
+                anyhow::ensure!((0.08..=0.6).contains(&c), "--profile-cell {c} must be 0 or lie in [0.08, 0.6] m");
             }
-            let features = FacingFeatures { cell, profile_cell, ..Default::default() };
+            let features = FacingFeatures { cell, profile_cell, detector_direction: !no_detector_direction, ..Default::default() };
             let opts = FacingOptions {
                 split: split.into(),
                 score_on: Some(score_on.into()),

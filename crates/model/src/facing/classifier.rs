@@ -1,4 +1,5 @@
-//! The facing stage: an occupancy histogram in the box's frame, read by a logistic regression.
+//! The facing stage: an occupancy histogram in the box's frame (and the detector's own
+//! direction), read by a logistic regression.
 
 use std::f64::consts::PI;
 
@@ -9,11 +10,11 @@ use super::features::{FacingFeatures, axis_sign, faces_along_axis};
 use super::logistic::LogisticRegression;
 use crate::person_minkunet::box_coder::wrap_angle;
 
-/// One box to learn from: its histogram and whether the true heading points along its signed
+/// One box to learn from: its features and whether the true heading points along its signed
 /// axis.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FacingSample {
-    /// [`FacingFeatures::histogram`] of the box.
+    /// [`FacingFeatures::read`] of the box.
     pub features: Vec<f64>,
     /// Whether the person faces the sensor's side of the box's axis.
     pub faces: bool,
@@ -23,7 +24,7 @@ impl FacingSample {
     /// The sample of box `b` (a detection, or a label) over `points`, with the person's true
     /// heading `true_rot_z`; `None` when too few points are inside.
     pub fn new(features: &FacingFeatures, points: &[[f32; 3]], b: &Box3d, true_rot_z: f64) -> Option<Self> {
-        Some(Self { features: features.histogram(points, b)?, faces: faces_along_axis(b, true_rot_z) })
+        Some(Self { features: features.read(points, b)?, faces: faces_along_axis(b, true_rot_z) })
     }
 }
 
@@ -44,13 +45,13 @@ pub struct FacingClassifier {
 }
 
 impl FacingClassifier {
-    /// Fits the stage on `samples` (histograms of `features`) with ridge `l2`.
+    /// Fits the stage on `samples` (read with `features`) with ridge `l2`.
     pub fn fit(features: FacingFeatures, samples: &[FacingSample], l2: f64) -> Result<Self, String> {
         if samples.is_empty() {
             return Err("no box to fit the facing stage on".into());
         }
         if let Some(s) = samples.iter().find(|s| s.features.len() != features.len()) {
-            return Err(format!("a sample has {} features where the histogram has {}", s.features.len(), features.len()));
+            return Err(format!("a sample has {} features where the features are {}", s.features.len(), features.len()));
         }
         let xs: Vec<Vec<f64>> = samples.iter().map(|s| s.features.clone()).collect();
         let ys: Vec<bool> = samples.iter().map(|s| s.faces).collect();
@@ -59,14 +60,14 @@ impl FacingClassifier {
         Ok(Self { features, regression, l2, samples: samples.len(), training_accuracy: right as f64 / samples.len() as f64 })
     }
 
-    /// Whether a stored stage is whole: as many weights, means and scales as the histogram has
+    /// Whether a stored stage is whole: as many weights, means and scales as the features have
     /// cells, all finite.
     pub fn check(&self) -> Result<(), String> {
         let r = &self.regression;
         let n = self.features.len();
         if n == 0 || [r.weights.len(), r.mean.len(), r.scale.len()].iter().any(|&k| k != n) {
             return Err(format!(
-                "the histogram has {n} cells but the regression {} weights, {} means, {} scales",
+                "the features are {n} but the regression {} weights, {} means, {} scales",
                 r.weights.len(),
                 r.mean.len(),
                 r.scale.len()
@@ -82,7 +83,7 @@ impl FacingClassifier {
     /// The probability that the person in `b` faces the sensor's side of its axis; `None` when
     /// too few of `points` are inside.
     pub fn probability(&self, points: &[[f32; 3]], b: &Box3d) -> Option<f64> {
-        Some(self.regression.probability(&self.features.histogram(points, b)?))
+        Some(self.regression.probability(&self.features.read(points, b)?))
     }
 
     /// `b` with its heading turned to the side the stage reads (box, axis and score unchanged);
@@ -159,7 +160,7 @@ mod tests {
         };
         stage.check().unwrap();
         stage.regression.weights.pop();
-        assert!(stage.check().unwrap_err().contains("359 weights"));
+        assert!(stage.check().unwrap_err().contains(&format!("{} weights", f.len() - 1)));
         stage.regression.weights.push(f64::NAN);
         assert!(stage.check().is_err());
         assert!(FacingClassifier::fit(f, &[], 0.01).is_err());

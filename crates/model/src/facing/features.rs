@@ -30,12 +30,19 @@ pub struct FacingFeatures {
     /// (m): a finer read than the 3D grid affords in cells a linear fit can weigh.
     #[serde(default)]
     pub profile_cell: Option<f64>,
+    /// Also the detector's own direction: +1 when the box's heading points at the sensor's side
+    /// of its axis, −1 away. A detector that has learned some of the direction (CenterPoint's
+    /// regressed sine and cosine) then keeps it where the points say little.
+    #[serde(default)]
+    pub detector_direction: bool,
 }
 
 impl Default for FacingFeatures {
-    /// 0.2 m cells over 1.2 × 1.2 × 2 m (360 cells), 5 cm margin, at least 3 points.
+    /// 0.15 m cells over 1.2 × 1.2 × 2 m (832 cells), 0.1 m projections (624 cells) and the
+    /// detector's direction, 5 cm margin, at least 3 points: the best of the variants measured
+    /// on the shipped weights (docs/recipe.md §15).
     fn default() -> Self {
-        Self { cell: 0.2, half_width: 0.6, height: 2.0, margin: 0.05, min_points: 3, profile_cell: None }
+        Self { cell: 0.15, half_width: 0.6, height: 2.0, margin: 0.05, min_points: 3, profile_cell: Some(0.1), detector_direction: true }
     }
 }
 
@@ -58,14 +65,14 @@ impl FacingFeatures {
         ((2.0 * self.half_width / cell).round() as usize, (self.height / cell).round() as usize)
     }
 
-    /// How many features [`histogram`](Self::histogram) returns.
+    /// How many features [`read`](Self::read) returns.
     pub fn len(&self) -> usize {
         let (n, nz) = self.grid(self.cell);
         let profiles = self.profile_cell.map_or(0, |c| {
             let (np, nzp) = self.grid(c);
             np * np + 2 * np * nzp
         });
-        n * n * nz + profiles
+        n * n * nz + profiles + self.detector_direction as usize
     }
 
     /// Whether the grid is empty (a zero-sized cell count).
@@ -74,10 +81,10 @@ impl FacingFeatures {
     }
 
     /// The share of `b`'s points (grown by the margin) in each cell of the frame, x-major then y
-    /// then z, then (with `profile_cell`) in each cell of the x–y, x–z and y–z projections;
-    /// `None` when fewer than `min_points` are inside. Points outside a grid count in its border
-    /// cells.
-    pub fn histogram(&self, points: &[[f32; 3]], b: &Box3d) -> Option<Vec<f64>> {
+    /// then z, then (with `profile_cell`) in each cell of the x–y, x–z and y–z projections, then
+    /// (with `detector_direction`) ±1; `None` when fewer than `min_points` are inside. Points
+    /// outside a grid count in its border cells.
+    pub fn read(&self, points: &[[f32; 3]], b: &Box3d) -> Option<Vec<f64>> {
         let sign = axis_sign(b);
         let (s, c) = b.rot_z.sin_cos();
         let floor = b.cz - b.h / 2.0;
@@ -115,6 +122,9 @@ impl FacingFeatures {
                 h[yz + iy * nzp + iz] += 1.0 / n;
             }
         }
+        if self.detector_direction {
+            *h.last_mut().expect("the direction's slot") = sign;
+        }
         Some(h)
     }
 }
@@ -141,7 +151,7 @@ mod tests {
 
     #[test]
     fn histogram_by_hand() {
-        let f = FacingFeatures::default();
+        let f = FacingFeatures { cell: 0.2, profile_cell: None, detector_direction: false, ..Default::default() };
         assert_eq!(f.len(), 6 * 6 * 10);
         // A person 5 m ahead on +x, heading 0 (away): the frame's x points back at the sensor
         // (the base's −x), its y to the base's −y. Two points at the floor, centroid (5, 0):
@@ -150,30 +160,39 @@ mod tests {
         let b = person(5.0, 0.0, 0.0);
         let floor = (b.cz - b.h / 2.0) as f32;
         let pts = [[4.85, 0.13, floor + 0.05], [5.15, -0.13, floor + 0.05], [9.0, 0.0, 0.0]];
-        let h = FacingFeatures { min_points: 2, ..f }.histogram(&pts, &b).unwrap();
+        let h = FacingFeatures { min_points: 2, ..f }.read(&pts, &b).unwrap();
         let at = |ix: usize, iy: usize, iz: usize| h[(ix * 6 + iy) * 10 + iz];
         assert_eq!(at(3, 2, 0), 0.5);
         assert_eq!(at(2, 3, 0), 0.5);
         assert_eq!(h.iter().sum::<f64>(), 1.0);
         // Fewer than min_points (3) inside: nothing to read.
-        assert!(f.histogram(&pts, &b).is_none());
+        assert!(f.read(&pts, &b).is_none());
         // With 0.1 m profiles (12 × 12 x–y, 12 × 20 x–z, 12 × 20 y–z cells after the 360): x
         // +0.15 → 7, −0.15 → 4; y −0.13 → 4, +0.13 → 7; z → 0.
         let g = FacingFeatures { min_points: 2, profile_cell: Some(0.1), ..f };
         assert_eq!(g.len(), 360 + 144 + 240 + 240);
-        let h = g.histogram(&pts, &b).unwrap();
+        let h = g.read(&pts, &b).unwrap();
         let (xy, xz, yz) = (360, 360 + 144, 360 + 144 + 240);
         assert_eq!([h[xy + 7 * 12 + 4], h[xy + 4 * 12 + 7]], [0.5, 0.5]);
         assert_eq!([h[xz + 7 * 20], h[xz + 4 * 20], h[yz + 4 * 20], h[yz + 7 * 20]], [0.5; 4]);
         assert!((h.iter().sum::<f64>() - 4.0).abs() < 1e-12);
+        // The detector's direction last: heading 0 points away from the sensor (−1), π at it.
+        let d = FacingFeatures { min_points: 2, detector_direction: true, ..f };
+        assert_eq!(d.len(), 361);
+        assert_eq!(d.read(&pts, &b).unwrap()[360], -1.0);
+        assert_eq!(d.read(&pts, &person(5.0, 0.0, PI)).unwrap()[360], 1.0);
     }
 
     #[test]
-    fn turning_the_box_by_half_a_turn_reads_the_same() {
+    fn turning_the_box_by_half_a_turn_reads_the_same_histogram() {
         let f = FacingFeatures { min_points: 1, ..Default::default() };
+        assert_eq!(f.len(), 832 + 624 + 1);
         let pts: Vec<[f32; 3]> = (0..40).map(|i| [5.0 + 0.01 * i as f32, 0.3 - 0.012 * i as f32, -0.7 + 0.04 * i as f32]).collect();
-        let a = f.histogram(&pts, &person(5.1, 0.1, 0.4)).unwrap();
-        let b = f.histogram(&pts, &person(5.1, 0.1, 0.4 + PI)).unwrap();
-        assert!(a.iter().zip(&b).all(|(x, y)| (x - y).abs() < 1e-12));
+        let a = f.read(&pts, &person(5.1, 0.1, 0.4)).unwrap();
+        let b = f.read(&pts, &person(5.1, 0.1, 0.4 + PI)).unwrap();
+        // The histogram reads the same; only the detector's direction flips.
+        let n = f.len() - 1;
+        assert!(a[..n].iter().zip(&b[..n]).all(|(x, y)| (x - y).abs() < 1e-12));
+        assert_eq!(a[n], -b[n]);
     }
 }
