@@ -64,7 +64,8 @@ pub struct PostProcessConfig {
     /// Turn each kept box's heading to the direction the points in it show, with the facing
     /// stage fitted for the checkpoint (`facing.json` beside its weights, `train facing`), when it
     /// has one; the box, its axis and its score are unchanged, so AP is too. Applied where a run's
-    /// model is loaded for inference (`infer`, `detect`, `serve`), not in training's validation.
+    /// model is loaded for inference (`infer`, a sweep's `--rescore`, `detect`, `serve`), not in
+    /// training's validation, `calibrate` or `facing` itself.
     pub facing_stage: bool,
 }
 

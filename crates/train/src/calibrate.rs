@@ -107,6 +107,8 @@ pub fn calibrate(run: &RunDir, opts: &CalibrateOptions) -> Result<RadialBias> {
     let stored = run.config()?;
     let mut cfg = stored.clone();
     cfg.model.post_mut().radial_shift = 0.0;
+    // The centres are what is measured; the facing stage only turns headings.
+    cfg.model.post_mut().facing_stage = false;
     let slot = opts.checkpoint.unwrap_or(Slot::Latest);
     let (detector, _, frames) = detect_run_split(run, cfg, opts.data_root.as_deref(), opts.backend, slot, opts.split, opts.verbose)?;
     let cfg = detector.config();

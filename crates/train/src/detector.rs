@@ -112,7 +112,9 @@ impl RunDetector {
         self.detect_batch(&batch).pop().unwrap_or_default()
     }
 
-    /// Detections for every sample of a batch prepared as [`DataConfig::eval_sample`] says.
+    /// Detections for every sample of a batch prepared as [`DataConfig::eval_sample`] says. The
+    /// facing stage reads each sample's points (`Batch::clouds`); a batch made without them
+    /// (training samples, a hand-made batch) keeps the network's directions.
     ///
     /// [`DataConfig::eval_sample`]: data_jrdb::DataConfig::eval_sample
     pub fn detect_batch(&self, batch: &Batch) -> Vec<Detections> {

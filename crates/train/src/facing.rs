@@ -18,7 +18,7 @@ use model::{FacingClassifier, FacingFeatures, FacingSample};
 use crate::backend::BackendKind;
 use crate::checkpoint::Slot;
 use crate::data::eval_loader;
-use crate::detector::RunDetector;
+use crate::infer::load_run_on;
 use crate::run_dir::{RunDir, write_atomic};
 use crate::validate::{FrameResult, HeadingError, matched_by_centre, visit_split};
 
@@ -146,14 +146,8 @@ fn frame_samples(frame: &FrameResult, cloud: &[[f32; 3]], opts: &FacingOptions, 
 /// `opts.write`, stores it beside the checkpoint.
 pub fn fit_facing(run: &RunDir, opts: &FacingOptions) -> Result<FacingReport> {
     let mut cfg = run.config()?;
-    if let Some(root) = &opts.data_root {
-        ensure!(root.exists(), "--data-root {}: no such folder", root.display());
-        cfg.data.root = root.clone();
-        cfg.data.simulate = None;
-    }
     cfg.model.post_mut().facing_stage = false;
-    let detector = RunDetector::with_config(&run.root, cfg, opts.checkpoint.unwrap_or(Slot::Latest), opts.backend)?;
-    crate::data::ensure_dataset(&detector.config().data)?;
+    let detector = load_run_on(run, cfg, opts.data_root.as_deref(), opts.backend, opts.checkpoint.unwrap_or(Slot::Latest))?;
     let protocol = detector.config().eval.protocol();
     let loader = eval_loader(detector.config(), opts.split)?;
     let (mut samples, mut frames) = (Vec::new(), 0);

@@ -75,18 +75,10 @@ pub fn split_name(split: Split) -> &'static str {
     }
 }
 
-/// The run's model (checkpoint `slot`, settings `cfg`) over `split` of `data_root` (default: the
-/// run's own data, simulated on first use), on `backend` (default: the config's): the detector,
-/// the split's loader and every frame's detections.
-pub fn detect_run_split(
-    run: &RunDir,
-    mut cfg: RunConfig,
-    data_root: Option<&Path>,
-    backend: Option<BackendKind>,
-    slot: Slot,
-    split: Split,
-    verbose: bool,
-) -> Result<(RunDetector, Loader, Vec<FrameResult>)> {
+/// The run's model (checkpoint `slot`, settings `cfg`) on `backend` (default: the config's),
+/// pointed at `data_root` (default: the run's own data, simulated on first use), with that data
+/// in place.
+pub fn load_run_on(run: &RunDir, mut cfg: RunConfig, data_root: Option<&Path>, backend: Option<BackendKind>, slot: Slot) -> Result<RunDetector> {
     if let Some(root) = data_root {
         anyhow::ensure!(root.exists(), "--data-root {}: no such folder", root.display());
         cfg.data.root = root.to_path_buf();
@@ -97,6 +89,21 @@ pub fn detect_run_split(
     }
     let detector = RunDetector::with_config(&run.root, cfg, slot, None)?;
     ensure_dataset(&detector.config().data)?;
+    Ok(detector)
+}
+
+/// [`load_run_on`], then every frame of `split`'s detections: the detector, the split's loader
+/// and the frames.
+pub fn detect_run_split(
+    run: &RunDir,
+    cfg: RunConfig,
+    data_root: Option<&Path>,
+    backend: Option<BackendKind>,
+    slot: Slot,
+    split: Split,
+    verbose: bool,
+) -> Result<(RunDetector, Loader, Vec<FrameResult>)> {
+    let detector = load_run_on(run, cfg, data_root, backend, slot)?;
     let loader = eval_loader(detector.config(), split)?;
     let frames = detect_split(|b| detector.detect_batch(b), &loader, verbose)?;
     Ok((detector, loader, frames))

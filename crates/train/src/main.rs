@@ -180,16 +180,16 @@ enum Cmd {
         #[arg(long, value_enum, default_value = "detections")]
         boxes: FitBoxes,
         /// Cell size (m) of the 3D occupancy histogram, 0.15 to 0.6.
-        #[arg(long, default_value_t = 0.15)]
+        #[arg(long, default_value_t = FacingFeatures::default().cell)]
         cell: f64,
         /// Cell size (m) of the three 2D projections read beside it, 0.08 to 0.6; 0: none.
-        #[arg(long, default_value_t = 0.1)]
+        #[arg(long, default_value_t = FacingFeatures::default().profile_cell.unwrap_or(0.0))]
         profile_cell: f64,
         /// Read the points only, not the detector's own direction.
         #[arg(long)]
         no_detector_direction: bool,
-        /// Ridge weight on the standardised features.
-        #[arg(long, default_value_t = 0.01)]
+        /// Ridge weight on the standardised features (positive).
+        #[arg(long, default_value_t = FacingOptions::default().l2)]
         l2: f64,
         /// Store the stage beside the checkpoint (default: only report).
         #[arg(long)]
@@ -358,7 +358,7 @@ fn main() -> ExitCode {
             let dir = RunDir::at(&run);
             pin(backend.unwrap_or(dir.config()?.backend));
             anyhow::ensure!((0.15..=0.6).contains(&cell), "--cell {cell} must lie in [0.15, 0.6] m (finer grids have too many cells for the fit)");
-            anyhow::ensure!(l2 >= 0.0 && l2.is_finite(), "--l2 {l2} must be a finite non-negative number");
+            anyhow::ensure!(l2 > 0.0 && l2.is_finite(), "--l2 {l2} must be a positive number");
             let profile_cell = (profile_cell != 0.0).then_some(profile_cell);
             if let Some(c) = profile_cell {
                 anyhow::ensure!((0.08..=0.6).contains(&c), "--profile-cell {c} must be 0 or lie in [0.08, 0.6] m");

@@ -45,19 +45,27 @@ fn fits_a_stage_that_turns_only_headings() {
     assert!(with.facing().is_some() && without.facing().is_none());
     let loader = train::data::eval_loader(with.config(), Split::TrainVal).unwrap();
     let batch = loader.epoch(0).next().unwrap().unwrap();
-    let (a, b) = (with.detect_batch(&batch), without.detect_batch(&batch));
-    let mut turned = 0;
-    for (a, b) in a.iter().zip(&b) {
-        assert_eq!(a.scores, b.scores);
-        for (x, y) in a.boxes.iter().zip(&b.boxes) {
-            assert_eq!([x.cx, x.cy, x.cz, x.l, x.w, x.h], [y.cx, y.cy, y.cz, y.l, y.w, y.h]);
-            let d = (x.rot_z - y.rot_z).rem_euclid(std::f64::consts::TAU);
-            let half_turn = (d - std::f64::consts::PI).abs() < 1e-9;
-            assert!(d < 1e-9 || std::f64::consts::TAU - d < 1e-9 || half_turn, "{} vs {}", x.rot_z, y.rot_z);
-            turned += half_turn as usize;
-        }
-    }
+    let turned: usize = with.detect_batch(&batch).iter().zip(&without.detect_batch(&batch)).map(|(a, b)| half_turns(a, b)).sum();
     assert!(turned > 0, "the stage turned none of the first batch's boxes");
+    // The one-cloud path of `detect` and `serve` applies it too.
+    let cloud = &batch.clouds[0];
+    assert!(half_turns(&with.detect(cloud), &without.detect(cloud)) > 0);
+}
+
+/// How many of `a`'s boxes are `b`'s turned by half a turn; panics unless every other box is the
+/// same, with the same score.
+fn half_turns(a: &model::Detections, b: &model::Detections) -> usize {
+    use std::f64::consts::{PI, TAU};
+    assert_eq!(a.scores, b.scores);
+    let mut turned = 0;
+    for (x, y) in a.boxes.iter().zip(&b.boxes) {
+        assert_eq!([x.cx, x.cy, x.cz, x.l, x.w, x.h], [y.cx, y.cy, y.cz, y.l, y.w, y.h]);
+        let d = (x.rot_z - y.rot_z).rem_euclid(TAU);
+        let half_turn = (d - PI).abs() < 1e-9;
+        assert!(d < 1e-9 || TAU - d < 1e-9 || half_turn, "{} vs {}", x.rot_z, y.rot_z);
+        turned += half_turn as usize;
+    }
+    turned
 }
 
 #[test]

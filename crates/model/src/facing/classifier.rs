@@ -47,27 +47,31 @@ pub struct FacingClassifier {
 impl FacingClassifier {
     /// Fits the stage on `samples` (read with `features`) with ridge `l2`.
     pub fn fit(features: FacingFeatures, samples: &[FacingSample], l2: f64) -> Result<Self, String> {
+        features.check()?;
         if samples.is_empty() {
             return Err("no box to fit the facing stage on".into());
         }
         if let Some(s) = samples.iter().find(|s| s.features.len() != features.len()) {
             return Err(format!("a sample has {} features where the features are {}", s.features.len(), features.len()));
         }
-        let xs: Vec<Vec<f64>> = samples.iter().map(|s| s.features.clone()).collect();
+        let xs: Vec<&[f64]> = samples.iter().map(|s| s.features.as_slice()).collect();
         let ys: Vec<bool> = samples.iter().map(|s| s.faces).collect();
-        let regression = LogisticRegression::fit(&xs, &ys, l2);
+        let regression = LogisticRegression::fit(&xs, &ys, l2)?;
         let right = xs.iter().zip(&ys).filter(|(x, y)| (regression.probability(x) > 0.5) == **y).count();
-        Ok(Self { features, regression, l2, samples: samples.len(), training_accuracy: right as f64 / samples.len() as f64 })
+        let stage = Self { features, regression, l2, samples: samples.len(), training_accuracy: right as f64 / samples.len() as f64 };
+        stage.check()?;
+        Ok(stage)
     }
 
-    /// Whether a stored stage is whole: as many weights, means and scales as the features have
-    /// cells, all finite.
+    /// Whether a stored stage is whole: a geometry with cells, as many weights, means and
+    /// scales as the features, all finite.
     pub fn check(&self) -> Result<(), String> {
+        self.features.check()?;
         let r = &self.regression;
         let n = self.features.len();
-        if n == 0 || [r.weights.len(), r.mean.len(), r.scale.len()].iter().any(|&k| k != n) {
+        if [r.weights.len(), r.mean.len(), r.scale.len()].iter().any(|&k| k != n) {
             return Err(format!(
-                "the features are {n} but the regression {} weights, {} means, {} scales",
+                "the features are {n} but the regression has {} weights, {} means, {} scales",
                 r.weights.len(),
                 r.mean.len(),
                 r.scale.len()
@@ -87,7 +91,9 @@ impl FacingClassifier {
     }
 
     /// `b` with its heading turned to the side the stage reads (box, axis and score unchanged);
-    /// as it was when too few points are inside.
+    /// as it was when too few points are inside. Applied once to a detector's box: with
+    /// `detector_direction` the box's own direction is one of the features, so a turned box
+    /// reads differently.
     pub fn orient(&self, points: &[[f32; 3]], b: &Box3d) -> Box3d {
         let Some(p) = self.probability(points, b) else { return *b };
         let along = axis_sign(b) > 0.0;
@@ -161,6 +167,13 @@ mod tests {
         stage.check().unwrap();
         stage.regression.weights.pop();
         assert!(stage.check().unwrap_err().contains(&format!("{} weights", f.len() - 1)));
+        stage.regression.weights.push(0.0);
+        stage.check().unwrap();
+        // A damaged geometry is refused before anything is sized from it.
+        for bad in [FacingFeatures { cell: 0.0, ..f }, FacingFeatures { height: 0.01, ..f }, FacingFeatures { profile_cell: Some(f64::NAN), ..f }] {
+            assert!(FacingClassifier { features: bad, ..stage.clone() }.check().is_err(), "{bad:?}");
+        }
+        stage.regression.weights.pop();
         stage.regression.weights.push(f64::NAN);
         assert!(stage.check().is_err());
         assert!(FacingClassifier::fit(f, &[], 0.01).is_err());

@@ -32,13 +32,15 @@ pub struct FacingFeatures {
     pub profile_cell: Option<f64>,
     /// Also the detector's own direction: +1 when the box's heading points at the sensor's side
     /// of its axis, −1 away. A detector that has learned some of the direction (CenterPoint's
-    /// regressed sine and cosine) then keeps it where the points say little.
+    /// regressed sine and cosine) then keeps it where the points say little. Absent from a
+    /// stored stage: off (the first stages did not read it), though on by default.
     #[serde(default)]
     pub detector_direction: bool,
 }
 
 impl Default for FacingFeatures {
-    /// 0.15 m cells over 1.2 × 1.2 × 2 m (832 cells), 0.1 m projections (624 cells) and the
+    /// 0.15 m cells over 1.2 × 1.2 × 1.95 m (8 × 8 × 13 = 832 cells; the height is rounded to
+    /// whole cells), 0.1 m projections (624 cells) and the
     /// detector's direction, 5 cm margin, at least 3 points: the best of the variants measured
     /// on the shipped weights (docs/recipe.md §15).
     fn default() -> Self {
@@ -65,6 +67,23 @@ impl FacingFeatures {
         ((2.0 * self.half_width / cell).round() as usize, (self.height / cell).round() as usize)
     }
 
+    /// Whether the geometry has cells to count in: every size finite and positive (the margin
+    /// not negative), at least one cell along every axis of every grid, a few million cells
+    /// at most. A stored stage is checked before anything is sized from it.
+    pub fn check(&self) -> Result<(), String> {
+        let sizes = [self.cell, self.half_width, self.height].into_iter().chain(self.profile_cell);
+        if sizes.clone().any(|v| !(v.is_finite() && v > 0.0)) || !(self.margin.is_finite() && self.margin >= 0.0) {
+            return Err(format!("facing features with a size that is not a positive number: {self:?}"));
+        }
+        for c in [self.cell].into_iter().chain(self.profile_cell) {
+            let (n, nz) = (2.0 * self.half_width / c, self.height / c);
+            if n.round() < 1.0 || nz.round() < 1.0 || n * n * nz > 4e6 {
+                return Err(format!("facing features whose {c} m grid has {n:.0} × {n:.0} × {nz:.0} cells"));
+            }
+        }
+        Ok(())
+    }
+
     /// How many features [`read`](Self::read) returns.
     pub fn len(&self) -> usize {
         let (n, nz) = self.grid(self.cell);
@@ -75,7 +94,7 @@ impl FacingFeatures {
         n * n * nz + profiles + self.detector_direction as usize
     }
 
-    /// Whether the grid is empty (a zero-sized cell count).
+    /// Whether it reads no feature at all.
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }
@@ -89,10 +108,15 @@ impl FacingFeatures {
         let (s, c) = b.rot_z.sin_cos();
         let floor = b.cz - b.h / 2.0;
         let m = self.margin;
+        // A cheap bound first: most of a frame's points are far from any one box.
+        let reach = (b.l / 2.0 + m).hypot(b.w / 2.0 + m);
         let inside: Vec<[f64; 3]> = points
             .iter()
             .filter_map(|p| {
                 let (dx, dy, dz) = (p[0] as f64 - b.cx, p[1] as f64 - b.cy, p[2] as f64 - floor);
+                if dx.abs() > reach || dy.abs() > reach {
+                    return None;
+                }
                 let (x, y) = (c * dx + s * dy, -s * dx + c * dy);
                 let within = x.abs() <= b.l / 2.0 + m && y.abs() <= b.w / 2.0 + m && dz >= -m && dz <= b.h + m;
                 within.then_some([sign * x, sign * y, dz])

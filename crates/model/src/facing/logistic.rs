@@ -29,8 +29,8 @@ fn sigmoid(m: f64) -> f64 {
     0.5 * (1.0 + (0.5 * m).tanh())
 }
 
-/// Solves `a · x = b` for a symmetric positive definite `a` (row-major n×n) by Cholesky;
-/// `None` when `a` is not positive definite.
+/// Solves `a · x = b` for a symmetric positive definite `a` (row-major n×n, its lower triangle
+/// read) by Cholesky; `None` when `a` is not positive definite.
 fn solve_spd(a: &[f64], b: &[f64]) -> Option<Vec<f64>> {
     let n = b.len();
     let mut l = vec![0.0; n * n];
@@ -60,19 +60,30 @@ fn solve_spd(a: &[f64], b: &[f64]) -> Option<Vec<f64>> {
 
 impl LogisticRegression {
     /// Fits `labels` from `samples` (all of one length), minimising the mean log-loss plus
-    /// `l2 / 2 · |w|²` (not on the bias), until a step gains less than 1e-9 or after 50 steps.
-    /// Panics when `samples` is empty or ragged: callers check what they collected.
-    pub fn fit(samples: &[Vec<f64>], labels: &[bool], l2: f64) -> Self {
-        assert!(!samples.is_empty() && samples.len() == labels.len(), "logistic regression needs as many labels as samples, at least one");
+    /// `l2 / 2 · |w|²` (not on the bias, `l2 > 0`: the shares of a histogram sum to one, so
+    /// without it the weights are not determined), until a step gains less than 1e-9 or after
+    /// 50 steps. An error when the input is empty or ragged, or when no step could be taken (a
+    /// singular system, a non-finite loss): a stage that never moved from zero would turn
+    /// every box away from the sensor.
+    pub fn fit<S: AsRef<[f64]>>(samples: &[S], labels: &[bool], l2: f64) -> Result<Self, String> {
+        if samples.is_empty() || samples.len() != labels.len() {
+            return Err(format!("{} samples and {} labels (as many, at least one, are needed)", samples.len(), labels.len()));
+        }
+        if !(l2 > 0.0 && l2.is_finite()) {
+            return Err(format!("ridge {l2}: it must be a positive number"));
+        }
+        let samples: Vec<&[f64]> = samples.iter().map(AsRef::as_ref).collect();
         let (n, d) = (samples.len(), samples[0].len());
-        assert!(samples.iter().all(|s| s.len() == d), "ragged samples");
+        if let Some(s) = samples.iter().find(|s| s.len() != d) {
+            return Err(format!("samples of {} and {d} features", s.len()));
+        }
         let nf = n as f64;
         let mut mean = vec![0.0; d];
-        for s in samples {
-            mean.iter_mut().zip(s).for_each(|(m, v)| *m += v / nf);
+        for s in &samples {
+            mean.iter_mut().zip(*s).for_each(|(m, v)| *m += v / nf);
         }
         let mut scale = vec![0.0; d];
-        for s in samples {
+        for s in &samples {
             scale.iter_mut().zip(s.iter().zip(&mean)).for_each(|(q, (v, m))| *q += (v - m) * (v - m) / nf);
         }
         scale.iter_mut().for_each(|q| *q = q.sqrt() + 1e-6);
@@ -88,6 +99,7 @@ impl LogisticRegression {
         };
         let mut w = vec![0.0; dim];
         let mut f = objective(&w);
+        let mut steps = 0;
         for _ in 0..50 {
             let m = margins(&w);
             let mut grad: Vec<f64> = (0..dim).map(|i| reg(i) * w[i]).collect();
@@ -106,32 +118,35 @@ impl LogisticRegression {
                     row.iter_mut().zip(&r[..=i]).for_each(|(a, rj)| *a += hi * rj);
                 }
             }
+            // The solver reads the lower triangle only.
             for i in 0..dim {
                 hess[i * dim + i] += reg(i) + 1e-9;
-                for j in 0..i {
-                    hess[j * dim + i] = hess[i * dim + j];
-                }
             }
             let Some(step) = solve_spd(&hess, &grad) else { break };
             let mut t = 1.0;
             let mut next: Vec<f64> = w.iter().zip(&step).map(|(a, s)| a - s).collect();
             let mut f_next = objective(&next);
-            while f_next > f && t > 1e-4 {
+            // `!(a <= b)` rather than `a > b`: a NaN loss is no descent.
+            while !(f_next <= f) && t > 1e-4 {
                 t *= 0.5;
                 next = w.iter().zip(&step).map(|(a, s)| a - t * s).collect();
                 f_next = objective(&next);
             }
-            if f_next > f {
+            if !(f_next <= f) {
                 break;
             }
             let gain = f - f_next;
             (w, f) = (next, f_next);
+            steps += 1;
             if gain < 1e-9 {
                 break;
             }
         }
+        if steps == 0 {
+            return Err("the fit took no step (a singular system or a non-finite loss)".into());
+        }
         let bias = w.pop().expect("the bias");
-        Self { mean, scale, weights: w, bias }
+        Ok(Self { mean, scale, weights: w, bias })
     }
 
     /// Number of features it reads.
@@ -180,7 +195,7 @@ mod tests {
             ys.push(rng.random::<f64>() < p);
             xs.push(x);
         }
-        let m = LogisticRegression::fit(&xs, &ys, 1e-6);
+        let m = LogisticRegression::fit(&xs, &ys, 1e-6).unwrap();
         let w: Vec<f64> = (0..3).map(|i| m.weights[i] / m.scale[i]).collect();
         let b = m.bias - (0..3).map(|i| w[i] * m.mean[i]).sum::<f64>();
         assert!((w[0] - 2.0).abs() < 0.1 && (w[1] + 1.0).abs() < 0.1 && w[2].abs() < 0.1 && (b - 0.5).abs() < 0.1, "{w:?} {b}");
@@ -193,8 +208,37 @@ mod tests {
         // Perfectly separable: the ridge keeps the weights finite and every label right.
         let xs: Vec<Vec<f64>> = (0..100).map(|i| vec![i as f64, 0.0]).collect();
         let ys: Vec<bool> = (0..100).map(|i| i >= 50).collect();
-        let m = LogisticRegression::fit(&xs, &ys, 1e-2);
+        let m = LogisticRegression::fit(&xs, &ys, 1e-2).unwrap();
         assert!(m.weights.iter().all(|w| w.is_finite()));
         assert!(xs.iter().zip(&ys).all(|(x, &y)| (m.probability(x) > 0.5) == y));
+    }
+
+    /// At the fit the objective's gradient, written out here from its definition, vanishes: with
+    /// a constant column (standardised to zeros) and sparse 0/1 columns like a histogram's, so
+    /// both the Hessian's skipped zero entries and the ridge are exercised.
+    #[test]
+    fn the_fit_is_a_stationary_point_of_the_objective() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
+        let (mut xs, mut ys) = (Vec::new(), Vec::new());
+        for _ in 0..3_000 {
+            let x: Vec<f64> = vec![1.0, (rng.random::<f64>() < 0.2) as u8 as f64, (rng.random::<f64>() < 0.6) as u8 as f64, rng.random::<f64>()];
+            ys.push(rng.random::<f64>() < sigmoid(1.5 * x[1] - 2.0 * x[2] + x[3]));
+            xs.push(x);
+        }
+        let l2 = 0.05;
+        let m = LogisticRegression::fit(&xs, &ys, l2).unwrap();
+        let n = xs.len() as f64;
+        let z = |x: &[f64], i: usize| (x[i] - m.mean[i]) / m.scale[i];
+        let mut grad = vec![0.0; 5];
+        for (x, &y) in xs.iter().zip(&ys) {
+            let r = m.probability(x) - if y { 1.0 } else { 0.0 };
+            (0..4).for_each(|i| grad[i] += r * z(x, i) / n);
+            grad[4] += r / n;
+        }
+        (0..4).for_each(|i| grad[i] += l2 * m.weights[i]);
+        assert!(grad.iter().all(|g| g.abs() < 1e-6), "{grad:?}");
+        assert!(m.weights[0].abs() < 1e-12, "a constant column carries no weight: {}", m.weights[0]);
+        assert!(LogisticRegression::fit(&xs, &ys, 0.0).is_err(), "no ridge");
+        assert!(LogisticRegression::fit(&xs[..0], &ys[..0], l2).is_err(), "no sample");
     }
 }
