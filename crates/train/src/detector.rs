@@ -124,7 +124,7 @@ impl RunDetector {
         };
         if let Some(stage) = &self.facing {
             for (d, cloud) in found.iter_mut().zip(&batch.clouds) {
-                d.boxes.iter_mut().for_each(|b| *b = stage.orient(cloud, b));
+                stage.orient_all(cloud, &mut d.boxes);
             }
         }
         found

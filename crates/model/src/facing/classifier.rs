@@ -1,6 +1,7 @@
 //! The facing stage: an occupancy histogram in the box's frame (and the detector's own
 //! direction), read by a logistic regression.
 
+use std::collections::HashMap;
 use std::f64::consts::PI;
 
 use data_jrdb::Box3d;
@@ -99,7 +100,41 @@ impl FacingClassifier {
         let along = axis_sign(b) > 0.0;
         if along == (p > 0.5) { *b } else { Box3d { rot_z: wrap_angle(b.rot_z + PI), ..*b } }
     }
+
+    /// [`orient`](Self::orient) for every box of one frame. The frame's points are bucketed
+    /// once by bird's-eye cell, so each box reads only those near it: a frame holds tens of
+    /// thousands of points and a hundred or more kept boxes.
+    pub fn orient_all(&self, points: &[[f32; 3]], boxes: &mut [Box3d]) {
+        if boxes.is_empty() {
+            return;
+        }
+        let key = |x: f64, y: f64| ((x / BUCKET).floor() as i64, (y / BUCKET).floor() as i64);
+        let mut buckets: HashMap<(i64, i64), Vec<[f32; 3]>> = HashMap::new();
+        for p in points.iter().filter(|p| p.iter().all(|v| v.is_finite())) {
+            buckets.entry(key(p[0] as f64, p[1] as f64)).or_default().push(*p);
+        }
+        let mut near = Vec::new();
+        for b in boxes.iter_mut() {
+            let reach = (b.l / 2.0 + self.features.margin).hypot(b.w / 2.0 + self.features.margin);
+            let ((x0, y0), (x1, y1)) = (key(b.cx - reach, b.cy - reach), key(b.cx + reach, b.cy + reach));
+            // A box wider than a room (no person's) reads every point rather than walk the cells.
+            if !reach.is_finite() || (x1 - x0 + 1).saturating_mul(y1 - y0 + 1) > 1024 {
+                *b = self.orient(points, b);
+                continue;
+            }
+            near.clear();
+            for ix in x0..=x1 {
+                for iy in y0..=y1 {
+                    near.extend_from_slice(buckets.get(&(ix, iy)).map_or(&[][..], Vec::as_slice));
+                }
+            }
+            *b = self.orient(&near, b);
+        }
+    }
 }
+
+/// The bird's-eye bucket of [`FacingClassifier::orient_all`] (m): about a person's reach.
+const BUCKET: f64 = 1.0;
 
 #[cfg(test)]
 mod tests {
@@ -152,6 +187,20 @@ mod tests {
         // No points: the box is left as it was.
         let b = box_at(3.0, 0.0, 1.0);
         assert_eq!(stage.orient(&[], &b), b);
+        // A whole frame at once (bucketed) turns every box as one at a time (all points) does,
+        // with people on bucket borders, a box with no points and a box wider than a room.
+        let mut cloud = Vec::new();
+        let mut boxes = Vec::new();
+        for i in 0..30 {
+            let (cx, cy, heading) = (-7.0 + 0.5 * i as f64, 0.98 + 0.7 * (i % 4) as f64, 0.9 * i as f64);
+            cloud.extend(person_points(cx, cy, heading));
+            boxes.push(box_at(cx, cy, heading + if i % 3 == 0 { PI } else { 0.0 }));
+        }
+        boxes.push(box_at(40.0, 40.0, 0.3));
+        boxes.push(Box3d { l: 3000.0, ..box_at(1.0, 1.0, 0.2) });
+        let one_by_one: Vec<Box3d> = boxes.iter().map(|b| stage.orient(&cloud, b)).collect();
+        stage.orient_all(&cloud, &mut boxes);
+        assert_eq!(boxes, one_by_one);
     }
 
     #[test]
