@@ -110,12 +110,13 @@ impl std::fmt::Display for FacingReport {
         let s = &self.stage;
         writeln!(
             f,
-            "facing stage: {} boxes from {} frames, {} features ({:.2} m grid, {} projections, {}the detector's direction), ridge {}; {:.1} % of them told right",
+            "facing stage: {} boxes from {} frames, {} features ({:.2} m grid, {} projections, {}slice moments, {}the detector's direction), ridge {}; {:.1} % of them told right",
             s.samples,
             self.frames,
             s.features.len(),
             s.features.cell,
             s.features.profile_cell.map_or("no".to_string(), |c| format!("{c:.2} m")),
+            if s.features.slice_moments { "" } else { "no " },
             if s.features.detector_direction { "" } else { "not " },
             s.l2,
             100.0 * s.training_accuracy

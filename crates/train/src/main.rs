@@ -188,6 +188,9 @@ enum Cmd {
         /// Read the points only, not the detector's own direction.
         #[arg(long)]
         no_detector_direction: bool,
+        /// Leave out each slice's mean and spread of the points along x and y.
+        #[arg(long)]
+        no_slice_moments: bool,
         /// Ridge weight on the standardised features (positive).
         #[arg(long, default_value_t = FacingOptions::default().l2)]
         l2: f64,
@@ -354,7 +357,7 @@ fn main() -> ExitCode {
             println!("{} frames; detections and scores in {}", out.frames, out.dir.display());
             Ok(())
         })(),
-        Some(Cmd::Facing { run, split, score_on, checkpoint, backend, data_root, boxes, cell, profile_cell, no_detector_direction, l2, write }) => (|| -> Result<()> {
+        Some(Cmd::Facing { run, split, score_on, checkpoint, backend, data_root, boxes, cell, profile_cell, no_detector_direction, no_slice_moments, l2, write }) => (|| -> Result<()> {
             let dir = RunDir::at(&run);
             pin(backend.unwrap_or(dir.config()?.backend));
             anyhow::ensure!((0.15..=0.6).contains(&cell), "--cell {cell} must lie in [0.15, 0.6] m (finer grids have too many cells for the fit)");
@@ -363,7 +366,7 @@ fn main() -> ExitCode {
             if let Some(c) = profile_cell {
                 anyhow::ensure!((0.08..=0.6).contains(&c), "--profile-cell {c} must be 0 or lie in [0.08, 0.6] m");
             }
-            let features = FacingFeatures { cell, profile_cell, detector_direction: !no_detector_direction, ..Default::default() };
+            let features = FacingFeatures { cell, profile_cell, detector_direction: !no_detector_direction, slice_moments: !no_slice_moments, ..Default::default() };
             let opts = FacingOptions {
                 split: split.into(),
                 score_on: Some(score_on.into()),

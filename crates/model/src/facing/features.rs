@@ -36,15 +36,21 @@ pub struct FacingFeatures {
     /// stored stage: off (the first stages did not read it), though on by default.
     #[serde(default)]
     pub detector_direction: bool,
+    /// Also, for each horizontal slice of the grid (its z cells), the mean and the spread of
+    /// the slice's points along x and y (m, from the centroid; 0 for an empty slice): where the
+    /// feet or a backpack sit relative to the body is a ratio of counts, which shares read
+    /// linearly cannot form.
+    #[serde(default)]
+    pub slice_moments: bool,
 }
 
 impl Default for FacingFeatures {
     /// 0.15 m cells over 1.2 × 1.2 × 1.95 m (8 × 8 × 13 = 832 cells; the height is rounded to
-    /// whole cells), 0.1 m projections (624 cells) and the
+    /// whole cells), 0.1 m projections (624 cells), the 13 slices' moments (52) and the
     /// detector's direction, 5 cm margin, at least 3 points: the best of the variants measured
     /// on the shipped weights (docs/recipe.md §15).
     fn default() -> Self {
-        Self { cell: 0.15, half_width: 0.6, height: 2.0, margin: 0.05, min_points: 3, profile_cell: Some(0.1), detector_direction: true }
+        Self { cell: 0.15, half_width: 0.6, height: 2.0, margin: 0.05, min_points: 3, profile_cell: Some(0.1), detector_direction: true, slice_moments: true }
     }
 }
 
@@ -91,7 +97,7 @@ impl FacingFeatures {
             let (np, nzp) = self.grid(c);
             np * np + 2 * np * nzp
         });
-        n * n * nz + profiles + self.detector_direction as usize
+        n * n * nz + profiles + if self.slice_moments { 4 * nz } else { 0 } + self.detector_direction as usize
     }
 
     /// Whether it reads no feature at all.
@@ -146,6 +152,26 @@ impl FacingFeatures {
                 h[yz + iy * nzp + iz] += 1.0 / n;
             }
         }
+        if self.slice_moments {
+            let start = nxy * nxy * nz + self.profile_cell.map_or(0, |c| {
+                let (np, nzp) = self.grid(c);
+                np * np + 2 * np * nzp
+            });
+            // Per slice: count, Σx, Σy, Σx², Σy² of the points from the centroid.
+            let mut sums = vec![[0.0f64; 5]; nz];
+            for q in &centred {
+                let (x, y) = (q[0] - self.half_width, q[1] - self.half_width);
+                let s = &mut sums[index(q[2], self.cell, nz)];
+                for (acc, v) in s.iter_mut().zip([1.0, x, y, x * x, y * y]) {
+                    *acc += v;
+                }
+            }
+            for (k, s) in sums.iter().enumerate().filter(|(_, s)| s[0] > 0.0) {
+                let (mx, my) = (s[1] / s[0], s[2] / s[0]);
+                let (vx, vy) = ((s[3] / s[0] - mx * mx).max(0.0), (s[4] / s[0] - my * my).max(0.0));
+                h[start + 4 * k..start + 4 * k + 4].copy_from_slice(&[mx, my, vx.sqrt(), vy.sqrt()]);
+            }
+        }
         if self.detector_direction {
             *h.last_mut().expect("the direction's slot") = sign;
         }
@@ -175,7 +201,7 @@ mod tests {
 
     #[test]
     fn histogram_by_hand() {
-        let f = FacingFeatures { cell: 0.2, profile_cell: None, detector_direction: false, ..Default::default() };
+        let f = FacingFeatures { cell: 0.2, profile_cell: None, detector_direction: false, slice_moments: false, ..Default::default() };
         assert_eq!(f.len(), 6 * 6 * 10);
         // A person 5 m ahead on +x, heading 0 (away): the frame's x points back at the sensor
         // (the base's −x), its y to the base's −y. Two points at the floor, centroid (5, 0):
@@ -200,6 +226,14 @@ mod tests {
         assert_eq!([h[xy + 7 * 12 + 4], h[xy + 4 * 12 + 7]], [0.5, 0.5]);
         assert_eq!([h[xz + 7 * 20], h[xz + 4 * 20], h[yz + 4 * 20], h[yz + 7 * 20]], [0.5; 4]);
         assert!((h.iter().sum::<f64>() - 4.0).abs() < 1e-12);
+        // Slice moments: both points in the first slice, at x ±0.15 and y ∓0.13 from their
+        // centroid: means 0, spreads 0.15 and 0.13; the other nine slices empty.
+        let m = FacingFeatures { min_points: 2, slice_moments: true, ..f };
+        assert_eq!(m.len(), 360 + 4 * 10);
+        let h = m.read(&pts, &b).unwrap();
+        let s0 = &h[360..364];
+        assert!(s0[0].abs() < 1e-6 && s0[1].abs() < 1e-6 && (s0[2] - 0.15).abs() < 1e-6 && (s0[3] - 0.13).abs() < 1e-6, "{s0:?}");
+        assert!(h[364..].iter().all(|v| *v == 0.0));
         // The detector's direction last: heading 0 points away from the sensor (−1), π at it.
         let d = FacingFeatures { min_points: 2, detector_direction: true, ..f };
         assert_eq!(d.len(), 361);
@@ -210,7 +244,7 @@ mod tests {
     #[test]
     fn turning_the_box_by_half_a_turn_reads_the_same_histogram() {
         let f = FacingFeatures { min_points: 1, ..Default::default() };
-        assert_eq!(f.len(), 832 + 624 + 1);
+        assert_eq!(f.len(), 832 + 624 + 52 + 1);
         let pts: Vec<[f32; 3]> = (0..40).map(|i| [5.0 + 0.01 * i as f32, 0.3 - 0.012 * i as f32, -0.7 + 0.04 * i as f32]).collect();
         let a = f.read(&pts, &person(5.1, 0.1, 0.4)).unwrap();
         let b = f.read(&pts, &person(5.1, 0.1, 0.4 + PI)).unwrap();
