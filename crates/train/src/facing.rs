@@ -170,7 +170,9 @@ pub fn fit_facing(run: &RunDir, opts: &FacingOptions) -> Result<FacingReport> {
             let loader = eval_loader(detector.config(), split)?;
             let (mut network, mut staged) = (Vec::new(), Vec::new());
             visit_split(|b| detector.detect_batch(b), &loader, opts.verbose, |frame, cloud| {
-                let turned: Vec<Detection> = frame.detections.iter().map(|d| Detection { bbox: stage.orient(cloud, &d.bbox), score: d.score }).collect();
+                let mut boxes: Vec<Box3d> = frame.detections.iter().map(|d| d.bbox).collect();
+                stage.orient_all(cloud, &mut boxes);
+                let turned: Vec<Detection> = boxes.into_iter().zip(&frame.detections).map(|(bbox, d)| Detection { bbox, score: d.score }).collect();
                 staged.push(FrameResult { detections: turned, ..frame.clone() });
                 network.push(frame);
             })?;

@@ -116,12 +116,13 @@ impl FacingClassifier {
         let mut near = Vec::new();
         for b in boxes.iter_mut() {
             let reach = (b.l / 2.0 + self.features.margin).hypot(b.w / 2.0 + self.features.margin);
-            let ((x0, y0), (x1, y1)) = (key(b.cx - reach, b.cy - reach), key(b.cx + reach, b.cy + reach));
-            // A box wider than a room (no person's) reads every point rather than walk the cells.
-            if !reach.is_finite() || (x1 - x0 + 1).saturating_mul(y1 - y0 + 1) > 1024 {
+            // A box wider than a room (no person's; a diverged network's, a non-finite one) reads
+            // every point rather than walk the cells, decided before any cell index is formed.
+            if !(reach <= MAX_BUCKET_REACH && b.cx.is_finite() && b.cy.is_finite()) {
                 *b = self.orient(points, b);
                 continue;
             }
+            let ((x0, y0), (x1, y1)) = (key(b.cx - reach, b.cy - reach), key(b.cx + reach, b.cy + reach));
             near.clear();
             for ix in x0..=x1 {
                 for iy in y0..=y1 {
@@ -135,6 +136,8 @@ impl FacingClassifier {
 
 /// The bird's-eye bucket of [`FacingClassifier::orient_all`] (m): about a person's reach.
 const BUCKET: f64 = 1.0;
+/// Boxes reaching farther than this (m) from their centre read the whole cloud instead.
+const MAX_BUCKET_REACH: f64 = 16.0;
 
 #[cfg(test)]
 mod tests {
@@ -198,6 +201,8 @@ mod tests {
         }
         boxes.push(box_at(40.0, 40.0, 0.3));
         boxes.push(Box3d { l: 3000.0, ..box_at(1.0, 1.0, 0.2) });
+        boxes.push(Box3d { l: 1e20, ..box_at(-2.0, 1.0, 0.2) });
+        boxes.push(Box3d { w: f64::INFINITY, ..box_at(2.0, 1.0, 0.2) });
         let one_by_one: Vec<Box3d> = boxes.iter().map(|b| stage.orient(&cloud, b)).collect();
         stage.orient_all(&cloud, &mut boxes);
         assert_eq!(boxes, one_by_one);

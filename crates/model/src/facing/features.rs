@@ -107,7 +107,8 @@ impl FacingFeatures {
 
     /// The share of `b`'s points (grown by the margin) in each cell of the frame, x-major then y
     /// then z, then (with `profile_cell`) in each cell of the x–y, x–z and y–z projections, then
-    /// (with `detector_direction`) ±1; `None` when fewer than `min_points` are inside. Points
+    /// (with `slice_moments`) each z slice's mean x, mean y, spread x, spread y, then (with
+    /// `detector_direction`) ±1; `None` when fewer than `min_points` are inside. Points
     /// outside a grid count in its border cells.
     pub fn read(&self, points: &[[f32; 3]], b: &Box3d) -> Option<Vec<f64>> {
         let sign = axis_sign(b);
