@@ -134,21 +134,8 @@ enum Cmd {
     /// matched people, on frames the run is not scored on) and, with --write, store the
     /// correcting `model.post.radial_shift` in the run's config.toml.
     Calibrate {
-        /// The run folder.
-        #[arg(long)]
-        run: PathBuf,
-        /// Split to measure on (default: the training split; or another tree's, with --data-root).
-        #[arg(long, value_enum, default_value = "train")]
-        split: SplitArg,
-        /// Checkpoint (default: latest).
-        #[arg(long, value_enum)]
-        checkpoint: Option<SlotArg>,
-        /// Backend (overrides the run's).
-        #[arg(long, value_enum)]
-        backend: Option<BackendKind>,
-        /// Measure on this JRDB-format tree instead of the run's own data.
-        #[arg(long, value_name = "DIR")]
-        data_root: Option<PathBuf>,
+        #[command(flatten)]
+        on: NotScored,
         /// Store the shift in RUN/config.toml (default: only print it).
         #[arg(long)]
         write: bool,
@@ -158,24 +145,11 @@ enum Cmd {
     /// and after it on the validation split and, with --write, store it beside the checkpoint
     /// (CHECKPOINT/facing.json), where infer, detect and serve apply it.
     Facing {
-        /// The run folder.
-        #[arg(long)]
-        run: PathBuf,
-        /// Split to fit on (default: the training split; or another tree's, with --data-root).
-        #[arg(long, value_enum, default_value = "train")]
-        split: SplitArg,
+        #[command(flatten)]
+        on: NotScored,
         /// Split to report the direction on (default: val).
         #[arg(long, value_enum, default_value = "val")]
         score_on: SplitArg,
-        /// Checkpoint (default: latest).
-        #[arg(long, value_enum)]
-        checkpoint: Option<SlotArg>,
-        /// Backend (overrides the run's).
-        #[arg(long, value_enum)]
-        backend: Option<BackendKind>,
-        /// Fit and report on this JRDB-format tree instead of the run's own data.
-        #[arg(long, value_name = "DIR")]
-        data_root: Option<PathBuf>,
         /// Learn from the run's matched detections (the boxes it is applied to) or the labels.
         #[arg(long, value_enum, default_value = "detections")]
         boxes: FitBoxes,
@@ -253,6 +227,26 @@ enum Cmd {
         #[arg(long)]
         rescore: bool,
     },
+}
+
+/// A run's checkpoint on frames it is not scored on: what `calibrate` and `facing` measure on.
+#[derive(Args)]
+struct NotScored {
+    /// The run folder.
+    #[arg(long)]
+    run: PathBuf,
+    /// Split to work on (default: the training split; or another tree's, with --data-root).
+    #[arg(long, value_enum, default_value = "train")]
+    split: SplitArg,
+    /// Checkpoint (default: latest).
+    #[arg(long, value_enum)]
+    checkpoint: Option<SlotArg>,
+    /// Backend (overrides the run's).
+    #[arg(long, value_enum)]
+    backend: Option<BackendKind>,
+    /// Work on this JRDB-format tree instead of the run's own data.
+    #[arg(long, value_name = "DIR")]
+    data_root: Option<PathBuf>,
 }
 
 /// The model and the frame of `detect` and `serve`.
@@ -357,7 +351,7 @@ fn main() -> ExitCode {
             println!("{} frames; detections and scores in {}", out.frames, out.dir.display());
             Ok(())
         })(),
-        Some(Cmd::Facing { run, split, score_on, checkpoint, backend, data_root, boxes, cell, profile_cell, no_detector_direction, no_slice_moments, l2, write }) => (|| -> Result<()> {
+        Some(Cmd::Facing { on: NotScored { run, split, checkpoint, backend, data_root }, score_on, boxes, cell, profile_cell, no_detector_direction, no_slice_moments, l2, write }) => (|| -> Result<()> {
             let dir = RunDir::at(&run);
             pin(backend.unwrap_or(dir.config()?.backend));
             anyhow::ensure!((0.15..=0.6).contains(&cell), "--cell {cell} must lie in [0.15, 0.6] m (finer grids have too many cells for the fit)");
@@ -382,7 +376,7 @@ fn main() -> ExitCode {
             println!("{}", train::fit_facing(&dir, &opts)?);
             Ok(())
         })(),
-        Some(Cmd::Calibrate { run, split, checkpoint, backend, data_root, write }) => (|| -> Result<()> {
+        Some(Cmd::Calibrate { on: NotScored { run, split, checkpoint, backend, data_root }, write }) => (|| -> Result<()> {
             let dir = RunDir::at(&run);
             pin(backend.unwrap_or(dir.config()?.backend));
             let (split, checkpoint) = (split.into(), checkpoint.map(Slot::from));

@@ -5,18 +5,16 @@
 //! matches and −0.073 m.)
 
 use data_jrdb::Split;
-use data_jrdb::sim::{SynthConfig, synth};
+use data_jrdb::sim::SynthConfig;
 use train::{CalibrateOptions, calibrate};
 
 mod common;
-use common::shipped_copy;
+use common::tree_and_shipped_run;
 
 #[test]
 fn measures_the_bias_and_writes_only_the_shift() {
     let tmp = tempfile::tempdir().unwrap();
-    let root = tmp.path().join("sim");
-    synth(&root, &SynthConfig { sequences: 2, frames: 8, seed: 5, max_people: 24, ..Default::default() }).unwrap();
-    let run = shipped_copy(&tmp.path().join("run"));
+    let (root, run) = tree_and_shipped_run(tmp.path(), SynthConfig { sequences: 2, frames: 8, seed: 5, max_people: 24, ..Default::default() });
     let before = run.config().unwrap();
     let opts = CalibrateOptions { split: Split::TrainVal, checkpoint: None, backend: None, data_root: Some(root.clone()), write: true, verbose: false };
     let bias = calibrate(&run, &opts).unwrap();
@@ -33,9 +31,7 @@ fn measures_the_bias_and_writes_only_the_shift() {
 #[test]
 fn too_few_people_is_an_error_and_writes_nothing() {
     let tmp = tempfile::tempdir().unwrap();
-    let root = tmp.path().join("sim");
-    synth(&root, &SynthConfig { sequences: 1, frames: 2, seed: 5, max_people: 3, ..Default::default() }).unwrap();
-    let run = shipped_copy(&tmp.path().join("run"));
+    let (root, run) = tree_and_shipped_run(tmp.path(), SynthConfig { sequences: 1, frames: 2, seed: 5, max_people: 3, ..Default::default() });
     let before = std::fs::read_to_string(run.config_file()).unwrap();
     let opts = CalibrateOptions { split: Split::TrainVal, checkpoint: None, backend: None, data_root: Some(root.clone()), write: true, verbose: false };
     let e = format!("{:#}", calibrate(&run, &opts).unwrap_err());

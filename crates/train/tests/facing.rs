@@ -4,12 +4,18 @@
 //! that writes nothing. (Features and fit are checked by hand in `model::facing`.)
 
 use data_jrdb::Split;
-use data_jrdb::sim::{SynthConfig, synth};
+use data_jrdb::sim::SynthConfig;
 use train::facing::FACING_FILE;
 use train::{FacingOptions, RunDetector, RunDir, Slot, fit_facing};
 
 mod common;
-use common::shipped_copy;
+use common::{shipped_copy, tree_and_shipped_run};
+
+/// Where the run's latest checkpoint keeps its facing stage.
+fn stage_file(run: &RunDir) -> std::path::PathBuf {
+    let latest = std::fs::read_to_string(run.checkpoints().join("latest")).unwrap();
+    run.checkpoints().join(latest.trim()).join(FACING_FILE)
+}
 
 /// The run's config pointed at the tree `root`.
 fn config_on(run: &RunDir, root: &std::path::Path, stage: bool) -> train::RunConfig {
@@ -23,9 +29,7 @@ fn config_on(run: &RunDir, root: &std::path::Path, stage: bool) -> train::RunCon
 #[test]
 fn fits_a_stage_that_turns_only_headings() {
     let tmp = tempfile::tempdir().unwrap();
-    let root = tmp.path().join("sim");
-    synth(&root, &SynthConfig { sequences: 3, frames: 20, seed: 5, max_people: 24, ..Default::default() }).unwrap();
-    let run = shipped_copy(&tmp.path().join("run"));
+    let (root, run) = tree_and_shipped_run(tmp.path(), SynthConfig { sequences: 3, frames: 20, seed: 5, max_people: 24, ..Default::default() });
     let opts = FacingOptions { split: Split::TrainVal, score_on: Some(Split::TrainVal), data_root: Some(root.clone()), write: true, ..Default::default() };
     let report = fit_facing(&run, &opts).unwrap();
     eprintln!("{report}");
@@ -72,8 +76,7 @@ fn half_turns(a: &model::Detections, b: &model::Detections) -> usize {
 fn a_damaged_stage_is_refused_naming_its_file() {
     let tmp = tempfile::tempdir().unwrap();
     let run = shipped_copy(&tmp.path().join("run"));
-    let latest = std::fs::read_to_string(run.checkpoints().join("latest")).unwrap();
-    let path = run.checkpoints().join(latest.trim()).join(FACING_FILE);
+    let path = stage_file(&run);
     std::fs::write(&path, "{\"features\": ").unwrap();
     let e = format!("{:#}", RunDetector::load(&run.root, Slot::Latest, None).err().unwrap());
     assert!(e.contains(&path.display().to_string()) && e.contains("not a facing stage"), "{e}");
@@ -86,11 +89,8 @@ fn a_damaged_stage_is_refused_naming_its_file() {
 #[test]
 fn too_few_people_is_an_error_and_writes_nothing() {
     let tmp = tempfile::tempdir().unwrap();
-    let root = tmp.path().join("sim");
-    synth(&root, &SynthConfig { sequences: 1, frames: 2, seed: 5, max_people: 3, ..Default::default() }).unwrap();
-    let run = shipped_copy(&tmp.path().join("run"));
-    let latest = std::fs::read_to_string(run.checkpoints().join("latest")).unwrap();
-    let path = run.checkpoints().join(latest.trim()).join(FACING_FILE);
+    let (root, run) = tree_and_shipped_run(tmp.path(), SynthConfig { sequences: 1, frames: 2, seed: 5, max_people: 3, ..Default::default() });
+    let path = stage_file(&run);
     let before = std::fs::read(&path).ok();
     let opts = FacingOptions { split: Split::TrainVal, score_on: None, data_root: Some(root.clone()), write: true, ..Default::default() };
     let e = format!("{:#}", fit_facing(&run, &opts).unwrap_err());

@@ -1,7 +1,9 @@
-//! What several of the train crate's integration tests share.
+//! What several of the train crate's integration tests share (each test file uses a part).
+#![allow(dead_code)]
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
+use data_jrdb::sim::{SynthConfig, synth};
 use train::RunDir;
 
 /// The shipped Person-MinkUNet run's config and checkpoints (the facing stage beside them
@@ -22,4 +24,11 @@ pub fn shipped_copy(dir: &Path) -> RunDir {
     copy_tree(&src.join("checkpoints"), &dir.join("checkpoints"));
     std::fs::copy(src.join("config.toml"), dir.join("config.toml")).unwrap();
     RunDir::at(dir)
+}
+
+/// A simulated tree (`sim`) and a copy of the shipped run (`run`) under `dir`.
+pub fn tree_and_shipped_run(dir: &Path, sim: SynthConfig) -> (PathBuf, RunDir) {
+    let root = dir.join("sim");
+    synth(&root, &sim).unwrap();
+    (root, shipped_copy(&dir.join("run")))
 }
