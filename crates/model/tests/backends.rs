@@ -3,6 +3,8 @@
 
 mod common;
 
+use std::io::Write;
+
 use common::sim_batch;
 use model::{CenterPointConfig, Detector, PersonMinkUNetConfig};
 use sparse_conv::burn::tensor::Device;
@@ -13,7 +15,8 @@ fn other_devices() -> Vec<(&'static str, Device)> {
     if std::env::var("PMUNET_TEST_WGPU").is_ok_and(|v| v == "1") {
         d.push(("wgpu", wgpu_device()));
     } else {
-        eprintln!("wgpu not checked: set PMUNET_TEST_WGPU=1 where a Vulkan adapter exists");
+        // Straight to stderr: libtest hides `eprintln!` of a passing test.
+        let _ = writeln!(std::io::stderr(), "wgpu not checked: set PMUNET_TEST_WGPU=1 where a Vulkan adapter exists");
     }
     d
 }

@@ -183,7 +183,7 @@ fn probe_wgpu() -> Option<Device> {
         if required {
             panic!("PMUNET_REQUIRE_WGPU=1 but {why}");
         }
-        eprintln!("skipping wgpu: {why} (set PMUNET_REQUIRE_WGPU=1 to make this an error)");
+        to_terminal(&format!("skipping wgpu: {why} (set PMUNET_REQUIRE_WGPU=1 to make this an error)"));
         None
     };
     let (tx, rx) = mpsc::channel();
@@ -208,11 +208,11 @@ fn probe_wgpu() -> Option<Device> {
         Ok(Ok(device)) => {
             std::thread::spawn(|| {
                 std::thread::sleep(BINARY_LIMIT);
-                eprintln!(
+                to_terminal(&format!(
                     "error: this test binary has run {} minutes with a wgpu device: a driver that stopped answering? \
                      (the wgpu tests finish in a few minutes on lavapipe)",
                     BINARY_LIMIT.as_secs() / 60
-                );
+                ));
                 std::process::exit(101);
             });
             Some(device)
@@ -220,6 +220,14 @@ fn probe_wgpu() -> Option<Device> {
         Ok(Err(why)) => skip(format!("no adapter runs the sparse conv: {why}")),
         Err(_) => skip(format!("the wgpu probe did not finish within {} s", PROBE_LIMIT.as_secs())),
     }
+}
+
+/// Writes a line to the terminal even from a passing test: libtest captures `eprintln!` (in
+/// threads a test spawns too) and shows it only for failures, which would hide why wgpu was
+/// skipped, and the watchdog's message before it exits.
+pub fn to_terminal(line: &str) {
+    use std::io::Write;
+    let _ = writeln!(std::io::stderr(), "{line}");
 }
 
 /// A backend the op's correctness tests run on, with the dtype it runs there and the tolerance
