@@ -18,8 +18,9 @@ graph = json.load(open(sys.argv[1]))
 units = graph['units']
 
 def package(u):
-    m = re.search(r'#(?:([\w-]+)@)?([^#@]+)$', u['pkg_id'])
-    return m.group(1) or u['pkg_id'].split('#')[0].rstrip('/').rsplit('/', 1)[-1]
+    # `…#name@version` for registry and git packages, `path+file:///…/name#version` for the workspace's
+    m = re.search(r'#([\w-]+)@', u['pkg_id'])
+    return m.group(1) if m else u['pkg_id'].split('#')[0].rstrip('/').rsplit('/', 1)[-1]
 
 def compile_time(u):
     kinds = u['target']['kind']
@@ -35,8 +36,8 @@ while stack:
 runtime_packages = {package(units[i]) for i in runtime}
 
 levels = defaultdict(set)
-for i, u in enumerate(units):
-    if i not in runtime and u['mode'] == 'build' and package(u) not in runtime_packages:
+for u in units:
+    if u['mode'] == 'build' and package(u) not in runtime_packages:
         levels[package(u)].add(str(u['profile']['opt_level']))
 
 seconds = defaultdict(float)
