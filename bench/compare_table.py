@@ -196,6 +196,49 @@ def combined(values):
     return median(numbers) if numbers else values[0]
 
 
+def ceiling_notes(rounds):
+    """What the live target asks of pmunet's conv kernels, round by round: spconv's own rate on
+    each subm conv and 1.5x that as a share of pmunet's SGEMM ceiling measured in the same round.
+    Near 100 %, the target asks pmunet's sparse conv to run as fast as a large dense SGEMM on the
+    same cores: the round's ratio then says how fast spconv ran more than how fast pmunet could."""
+    lines = []
+    for c in (32, 64, 128):
+        for key, label, factor in (("fwd", "fwd", 1), ("fwd_bwd", "fwd+bwd", 3)):
+            rates, shares, own = [], [], []
+            field = {"fwd": "fwd_ms", "fwd_bwd": "fwd_bwd_ms"}[key]
+            for r in rounds:
+                pairs = get(r.part("convs"), "convs", "subm_pairs")
+                ms = get(r.part("convs"), "convs", "subm", str(c), key, "median_ms")
+                if isinstance(pairs, Missing) or isinstance(ms, Missing) or not ms:
+                    continue
+                rate = factor * 2.0 * pairs * c * c / ms / 1e6
+                rates.append(rate)
+                share, mine = [], []
+                for b in BACKENDS:
+                    ceiling = get(r.conv[b], "sgemm", "gflops")
+                    pm = get(r.conv[b], "results", ("c_in", c), field)
+                    if isinstance(ceiling, Missing) or not ceiling:
+                        share.append("n/a")
+                        mine.append("n/a")
+                        continue
+                    share.append(f"{100 * TIME_TARGET * rate / ceiling:.0f}")
+                    mine.append("n/a" if isinstance(pm, Missing) or not pm else f"{100 * factor * 2.0 * pairs * c * c / pm / 1e6 / ceiling:.0f}")
+                shares.append(" / ".join(share))
+                own.append(" / ".join(mine))
+            if rates:
+                lines.append(f"| C{c} {label} | {', '.join(f'{v:.0f}' for v in rates)} | {', '.join(shares)} | {', '.join(own)} |")
+    if not lines:
+        return []
+    head = (f"What the live {TIME_TARGET}x asks of pmunet's kernels, round by round: spconv's rate on each subm conv "
+            "(2·pairs·C² per forward, three times that per forward+backward, over spconv's median) and "
+            f"{TIME_TARGET}x that rate as a % of pmunet's own SGEMM ceiling in the same round (flex / ndarray). "
+            "Near 100 %, a round's target asks pmunet's sparse conv to run as fast as a large dense SGEMM. "
+            "The last column is pmunet's own median in the same unit.\n\n"
+            "  | conv | spconv GFLOP/s by round | 1.5x spconv, % of pmunet's SGEMM ceiling, by round | pmunet, % of its SGEMM ceiling, by round |\n"
+            "  |---|---|---|---|\n")
+    return [head + "\n".join("  " + l for l in lines)]
+
+
 def main():
     if len(sys.argv) != 2:
         raise SystemExit(__doc__)
@@ -365,6 +408,7 @@ def main():
         else:
             line += "less than the non-convolution time alone."
         notes.append(line)
+    notes += ceiling_notes(rounds)
     for key in ("load_before",):  # load after includes this run itself
         try:
             load1 = float(meta.get(key, "").split()[0])
