@@ -149,6 +149,9 @@ struct Report {
     map_ms: f64,
     /// The CPU kernels' GEMM at this thread count; none on wgpu, whose kernels do not use it.
     sgemm: Option<GemmCeiling>,
+    /// The cores' f32 multiply-add peak at the kernels' vector width, all threads
+    /// (`sparse_conv::fma_peak_gflops`); none on wgpu and on the general path.
+    fma_peak_gflops: Option<f64>,
     /// On wgpu, Burn's own f32 matmul on the device: the GPU figure the op is set against.
     device_matmul: Option<GemmCeiling>,
     /// Calls per sync in the timings (1 on the CPU backends).
@@ -217,6 +220,7 @@ fn measure(args: &Args, scene_coords: &[sparse_conv::Coord]) -> anyhow::Result<R
 
     let cpu = matches!(args.backend, Backend::Flex | Backend::Ndarray);
     let sgemm = cpu.then(|| gemm_ceiling(2048, args.warmup, args.runs.min(5)));
+    let fma_peak_gflops = if cpu { sparse_conv::fma_peak_gflops() } else { None };
     let queue = if cpu { 1 } else { args.queue.max(1) };
     let device_matmul = (!cpu).then(|| device_matmul(&device, args.matmul_size, args.warmup, args.runs.min(5), queue));
     let mut results = Vec::new();
@@ -301,6 +305,7 @@ fn measure(args: &Args, scene_coords: &[sparse_conv::Coord]) -> anyhow::Result<R
         runs: args.runs,
         map_ms,
         sgemm,
+        fma_peak_gflops,
         device_matmul,
         queue,
         results,
@@ -425,6 +430,9 @@ fn print_table(r: &Report) {
     println!("submanifold map build: {:.2} ms", r.map_ms);
     if let Some(sgemm) = &r.sgemm {
         println!("SGEMM ceiling ({0}×{0}×{0}, the kernels' GEMM): {1:.1} GFLOP/s", sgemm.size, sgemm.gflops);
+        if let Some(peak) = r.fma_peak_gflops {
+            println!("f32 multiply-add peak of the cores at the kernels' width: {peak:.1} GFLOP/s (the SGEMM ceiling is {:.0} % of it)", 100.0 * sgemm.gflops / peak);
+        }
     }
     if let Some(m) = &r.device_matmul {
         println!("device f32 matmul ({0}×{0}×{0}, Burn's): {1:.1} GFLOP/s, {2:.3} ms; {3} calls per sync in every figure", m.size, m.gflops, m.ms, r.queue);

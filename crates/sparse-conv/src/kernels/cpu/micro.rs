@@ -264,6 +264,8 @@ pub(crate) unsafe trait TileKernels: Simd {
     /// [`param_block`].
     #[allow(clippy::too_many_arguments)]
     unsafe fn param_block(x: &[f32], g: &[f32], c: usize, a: &[f32], b: &[f32], mean: &[f32], relu: bool, total: &mut [f64]);
+    /// [`fma_chains`](super::peak::fma_chains).
+    unsafe fn fma_chains(iterations: usize) -> f32;
 }
 
 /// Implements [`TileKernels`] for an instruction set `$isa` whose target features are `$features`.
@@ -292,6 +294,10 @@ macro_rules! tile_kernels {
             #[target_feature(enable = $features)]
             unsafe fn param_block(x: &[f32], g: &[f32], c: usize, a: &[f32], b: &[f32], mean: &[f32], relu: bool, total: &mut [f64]) {
                 unsafe { self::param_block::<Self>(x, g, c, a, b, mean, relu, total) }
+            }
+            #[target_feature(enable = $features)]
+            unsafe fn fma_chains(iterations: usize) -> f32 {
+                unsafe { super::peak::fma_chains::<Self>(iterations) }
             }
         }
     };

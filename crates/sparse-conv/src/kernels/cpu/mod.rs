@@ -9,7 +9,8 @@
 //! Layout: [`Element`] (`element`) is what the kernels share and the leaf every other file here
 //! depends on; `conv` and [`norm`] are the general kernels; `native` gives f32 its hooks into
 //! `micro`, the f32 register-tile kernels written once over `simd`'s vector type (AVX-512F,
-//! AVX2 + FMA), which fall back on nothing but `element` and `conv`.
+//! AVX2 + FMA), which fall back on nothing but `element` and `conv`; `peak` times the cores'
+//! multiply-add peak on the same vector type, for the benchmarks.
 
 pub mod adam;
 mod conv;
@@ -20,6 +21,8 @@ mod micro;
 #[cfg_attr(not(target_arch = "x86_64"), allow(unreachable_code, unused_imports, unused_variables))]
 mod native;
 pub mod norm;
+#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code, unused_imports))]
+mod peak;
 #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
 mod simd;
 
@@ -27,4 +30,5 @@ pub use conv::{pair_conv, weight_grad};
 pub use element::{Element, PairDirection, RowEpilogue};
 pub(crate) use element::filled_in_chunks;
 pub(crate) use simd::Level;
+pub use peak::fma_peak_gflops;
 pub use simd::{cpu_features, cpu_kernel_path};
