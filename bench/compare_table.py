@@ -198,35 +198,37 @@ def combined(values):
 
 def ceiling_notes(rounds):
     """What the live target asks of pmunet's conv kernels, round by round: spconv's own rate on
-    each subm conv and 1.5x that as a share of pmunet's SGEMM ceiling measured in the same round.
-    Near 100 %, the target asks pmunet's sparse conv to run as fast as a large dense SGEMM on the
-    same cores: the round's ratio then says how fast spconv ran more than how fast pmunet could."""
+    each subm conv and the target's multiple of it as a share of pmunet's SGEMM ceiling measured in
+    the same round, beside pmunet's own rate as a share of that ceiling. Near 100 %, the target asks
+    pmunet's sparse conv to run as fast as a large dense SGEMM on the same cores: the round's ratio
+    then says how fast spconv ran more than how fast pmunet could."""
+
+    def rate(pairs, c, factor, ms):
+        """GFLOP/s of `factor` convolutions of 2·pairs·C² flops in `ms`, or None."""
+        if isinstance(pairs, Missing) or isinstance(ms, Missing) or not ms:
+            return None
+        return factor * 2.0 * pairs * c * c / ms / 1e6
+
+    def pct(value, ceiling):
+        return "n/a" if value is None or isinstance(ceiling, Missing) or not ceiling else f"{100 * value / ceiling:.0f}"
+
     lines = []
     for c in (32, 64, 128):
-        for key, label, factor in (("fwd", "fwd", 1), ("fwd_bwd", "fwd+bwd", 3)):
+        for key, label, factor, field in (("fwd", "fwd", 1, "fwd_ms"), ("fwd_bwd", "fwd+bwd", 3, "fwd_bwd_ms")):
             rates, shares, own = [], [], []
-            field = {"fwd": "fwd_ms", "fwd_bwd": "fwd_bwd_ms"}[key]
             for r in rounds:
-                pairs = get(r.part("convs"), "convs", "subm_pairs")
-                ms = get(r.part("convs"), "convs", "subm", str(c), key, "median_ms")
-                if isinstance(pairs, Missing) or isinstance(ms, Missing) or not ms:
-                    continue
-                rate = factor * 2.0 * pairs * c * c / ms / 1e6
-                rates.append(rate)
+                peer = rate(get(r.part("convs"), "convs", "subm_pairs"), c, factor,
+                            get(r.part("convs"), "convs", "subm", str(c), key, "median_ms"))
+                rates.append("n/a" if peer is None else f"{peer:.0f}")
                 share, mine = [], []
                 for b in BACKENDS:
                     ceiling = get(r.conv[b], "sgemm", "gflops")
-                    pm = get(r.conv[b], "results", ("c_in", c), field)
-                    if isinstance(ceiling, Missing) or not ceiling:
-                        share.append("n/a")
-                        mine.append("n/a")
-                        continue
-                    share.append(f"{100 * TIME_TARGET * rate / ceiling:.0f}")
-                    mine.append("n/a" if isinstance(pm, Missing) or not pm else f"{100 * factor * 2.0 * pairs * c * c / pm / 1e6 / ceiling:.0f}")
+                    share.append(pct(None if peer is None else TIME_TARGET * peer, ceiling))
+                    mine.append(pct(rate(get(r.conv[b], "pairs"), c, factor, get(r.conv[b], "results", ("c_in", c), field)), ceiling))
                 shares.append(" / ".join(share))
                 own.append(" / ".join(mine))
-            if rates:
-                lines.append(f"| C{c} {label} | {', '.join(f'{v:.0f}' for v in rates)} | {', '.join(shares)} | {', '.join(own)} |")
+            if any(v != "n/a" for v in rates):
+                lines.append(f"| C{c} {label} | {', '.join(rates)} | {', '.join(shares)} | {', '.join(own)} |")
     if not lines:
         return []
     head = (f"What the live {TIME_TARGET}x asks of pmunet's kernels, round by round: spconv's rate on each subm conv "
@@ -234,7 +236,7 @@ def ceiling_notes(rounds):
             f"{TIME_TARGET}x that rate as a % of pmunet's own SGEMM ceiling in the same round (flex / ndarray). "
             "Near 100 %, a round's target asks pmunet's sparse conv to run as fast as a large dense SGEMM. "
             "The last column is pmunet's own median in the same unit.\n\n"
-            "  | conv | spconv GFLOP/s by round | 1.5x spconv, % of pmunet's SGEMM ceiling, by round | pmunet, % of its SGEMM ceiling, by round |\n"
+            f"  | conv | spconv GFLOP/s by round | {TIME_TARGET}x spconv, % of pmunet's SGEMM ceiling, by round | pmunet, % of its SGEMM ceiling, by round |\n"
             "  |---|---|---|---|\n")
     return [head + "\n".join("  " + l for l in lines)]
 

@@ -21,7 +21,7 @@ mod micro;
 #[cfg_attr(not(target_arch = "x86_64"), allow(unreachable_code, unused_imports, unused_variables))]
 mod native;
 pub mod norm;
-#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code, unused_imports))]
+#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code, unused_imports, unreachable_code))]
 mod peak;
 #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
 mod simd;
