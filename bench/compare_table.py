@@ -203,30 +203,23 @@ def ceiling_notes(rounds):
     pmunet's sparse conv to run as fast as a large dense SGEMM on the same cores: the round's ratio
     then says how fast spconv ran more than how fast pmunet could."""
 
-    def rate(pairs, c, factor, ms):
-        """GFLOP/s of `factor` convolutions of 2·pairs·C² flops in `ms`, or None."""
-        if isinstance(pairs, Missing) or isinstance(ms, Missing) or not ms:
-            return None
-        return factor * 2.0 * pairs * c * c / ms / 1e6
-
     def pct(value, ceiling):
-        return "n/a" if value is None or isinstance(ceiling, Missing) or not ceiling else f"{100 * value / ceiling:.0f}"
+        ok = not any(isinstance(v, Missing) or not v for v in (value, ceiling))
+        return f"{100 * value / ceiling:.0f}" if ok else "n/a"
 
     lines = []
     for c in (32, 64, 128):
-        for key, label, factor, field in (("fwd", "fwd", 1, "fwd_ms"), ("fwd_bwd", "fwd+bwd", 3, "fwd_bwd_ms")):
+        # Both sides' GFLOP/s over their medians: 2·pairs·C² per forward, three times that per
+        # forward+backward.
+        for key, label, field in (("fwd", "fwd", "fwd_gflops"), ("fwd_bwd", "fwd+bwd", "fwd_bwd_gflops")):
             rates, shares, own = [], [], []
             for r in rounds:
-                peer = rate(get(r.part("convs"), "convs", "subm_pairs"), c, factor,
-                            get(r.part("convs"), "convs", "subm", str(c), key, "median_ms"))
-                rates.append("n/a" if peer is None else f"{peer:.0f}")
-                share, mine = [], []
-                for b in BACKENDS:
-                    ceiling = get(r.conv[b], "sgemm", "gflops")
-                    share.append(pct(None if peer is None else TIME_TARGET * peer, ceiling))
-                    mine.append(pct(rate(get(r.conv[b], "pairs"), c, factor, get(r.conv[b], "results", ("c_in", c), field)), ceiling))
-                shares.append(" / ".join(share))
-                own.append(" / ".join(mine))
+                peer = get(r.part("convs"), "convs", "subm", str(c), key, "gflops_median")
+                rates.append("n/a" if isinstance(peer, Missing) else f"{peer:.0f}")
+                target = peer if isinstance(peer, Missing) else TIME_TARGET * peer
+                ceilings = [get(r.conv[b], "sgemm", "gflops") for b in BACKENDS]
+                shares.append(" / ".join(pct(target, ceiling) for ceiling in ceilings))
+                own.append(" / ".join(pct(get(r.conv[b], "results", ("c_in", c), field), ceiling) for b, ceiling in zip(BACKENDS, ceilings)))
             if any(v != "n/a" for v in rates):
                 lines.append(f"| C{c} {label} | {', '.join(rates)} | {', '.join(shares)} | {', '.join(own)} |")
     if not lines:
