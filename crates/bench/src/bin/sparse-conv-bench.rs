@@ -100,6 +100,11 @@ struct KernelTimes {
     fwd_overhead_ms: f64,
     /// `fwd_bwd_ms` of the op minus the three kernels.
     fwd_bwd_overhead_ms: f64,
+    /// The forward kernel's rate, and its register tile's alone on rows in cache at this depth
+    /// (`sparse_conv::tile_peak_gflops`; none on the general path): the gap between the two is
+    /// what the scattered rows cost.
+    fwd_gflops: f64,
+    tile_peak_gflops: Option<f64>,
 }
 
 /// The scene tiled `scale` times, at the first channel count.
@@ -382,6 +387,8 @@ fn kernel_times(map: &KernelMap, c: usize, warmup: usize, runs: usize, op_fwd_ms
         weight_grad_ms,
         fwd_overhead_ms: op_fwd_ms - fwd_ms,
         fwd_bwd_overhead_ms: op_fwd_bwd_ms - fwd_ms - input_grad_ms - weight_grad_ms,
+        fwd_gflops: 2.0 * map.num_pairs() as f64 * (c * c) as f64 / fwd_ms / 1e6,
+        tile_peak_gflops: sparse_conv::tile_peak_gflops(c),
     }
 }
 
@@ -465,6 +472,14 @@ fn print_table(r: &Report) {
             "  C={}: kernels fwd {:.2} / input grad {:.2} / weight grad {:.2} ms; outside the kernels: fwd {:.2}, fwd+bwd {:.2} ms",
             row.c_in, k.fwd_ms, k.input_grad_ms, k.weight_grad_ms, k.fwd_overhead_ms, k.fwd_bwd_overhead_ms
         );
+        if let Some(tile) = k.tile_peak_gflops {
+            let of_peak = r.fma_peak_gflops.map_or_else(String::new, |peak| format!(" ({:.0} % of the peak)", 100.0 * tile / peak));
+            println!(
+                "         the forward's register tile on rows in cache: {tile:.1} GFLOP/s{of_peak}; the forward kernel on the scene's rows: {:.1} ({:.0} % of the tile's)",
+                k.fwd_gflops,
+                100.0 * k.fwd_gflops / tile
+            );
+        }
     }
     for s in &r.strided {
         println!("down k2s2 C={} fwd+bwd (map included): {:.2} ms; up (transposed) fwd+bwd: {:.2} ms", s.channels, s.down_fwd_bwd_ms, s.up_fwd_bwd_ms);

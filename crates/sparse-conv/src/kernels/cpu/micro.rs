@@ -329,6 +329,7 @@ macro_rules! by_rows {
         }
     };
 }
+pub(crate) use by_rows;
 
 /// Runs `$call` with `$v` the instruction set of `$level` (a [`Level`](super::simd::Level)).
 macro_rules! at_level {

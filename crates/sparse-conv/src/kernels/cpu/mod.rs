@@ -10,7 +10,8 @@
 //! depends on; `conv` and [`norm`] are the general kernels; `native` gives f32 its hooks into
 //! `micro`, the f32 register-tile kernels written once over `simd`'s vector type (AVX-512F,
 //! AVX2 + FMA), which fall back on nothing but `element` and `conv`; `peak` times the cores'
-//! multiply-add peak on the same vector type, for the benchmarks.
+//! multiply-add peak on the same vector type, and the forward's register tile on cached rows,
+//! for the benchmarks.
 
 pub mod adam;
 mod conv;
@@ -30,5 +31,5 @@ pub use conv::{pair_conv, weight_grad};
 pub use element::{Element, PairDirection, RowEpilogue};
 pub(crate) use element::filled_in_chunks;
 pub(crate) use simd::Level;
-pub use peak::fma_peak_gflops;
+pub use peak::{fma_peak_gflops, tile_peak_gflops};
 pub use simd::{cpu_features, cpu_kernel_path};

@@ -1,11 +1,14 @@
-//! The cores' f32 multiply-add peak at the width the op's kernels run: chains of fused
-//! multiply-adds on registers alone, on every rayon thread at once. No kernel on these cores can
-//! pass it, so the benchmarks give it beside the dense SGEMM ceiling: the SGEMM says what a GEMM
-//! reaches, the peak what the cores allow.
+//! The cores' f32 multiply-add peak at the width the op's kernels run, and what the op's own
+//! register tile reaches when memory costs nothing. The peak is chains of fused multiply-adds on
+//! registers alone, on every rayon thread at once: no kernel on these cores can pass it. The tile
+//! figure runs the forward's micro-kernel over and over on a few tiles' rows and one panel that
+//! stay in cache. The benchmarks give both beside the dense SGEMM ceiling and the op's own rate:
+//! from the peak to the cached tile is what the micro-kernel's instructions cost, from the cached
+//! tile to the op what its scattered rows (memory) cost.
 
 use std::time::Instant;
 
-use super::micro::{TileKernels, at_level};
+use super::micro::{TileKernels, at_level, by_rows};
 use super::simd::{Level, Simd, level};
 
 /// Independent accumulators: more than FMA latency × FMA pipes on the cores we target (4 × 2
@@ -40,6 +43,70 @@ fn peak_at(level: Option<Level>, iterations: usize, calls: usize) -> Option<f64>
         .fold(f64::INFINITY, f64::min);
     let flops = 2.0 * (rayon::current_num_threads() * CHAINS * lanes * iterations) as f64;
     Some(flops / best / 1e9)
+}
+
+/// Multiply-adds per thread in one timed call of the cached tile: some 30–90 ms on the cores we
+/// target.
+const TILE_MULTIPLY_ADDS: usize = 2_000_000_000;
+
+/// Row tiles the cached-tile loop cycles through, as the op's tiles follow one another.
+const TILES: usize = 2;
+
+/// The f32 GFLOP/s of the forward's register tile ([`Simd::MR`] rows, two vectors wide) times
+/// a panel `depth` rows deep, added into its destination rows, on every rayon thread at once, with
+/// its source rows, panel and destinations in cache (L1 while `TILES` tiles' rows and a panel
+/// fit, L2 beyond); `None` where the kernels take the general path or `depth` is 0.
+pub fn tile_peak_gflops(depth: usize) -> Option<f64> {
+    tile_rate_at(level(), depth, TILE_MULTIPLY_ADDS, CALLS)
+}
+
+/// [`tile_peak_gflops`] on `level`, with some `multiply_adds` per thread and call, the fastest
+/// of `calls`.
+fn tile_rate_at(level: Option<Level>, depth: usize, multiply_adds: usize, calls: usize) -> Option<f64> {
+    let level = level?;
+    if depth == 0 {
+        return None;
+    }
+    let (lanes, mr): (usize, usize) = at_level!(level, |V| (V::LANES, V::MR));
+    let per_tile = mr * 2 * lanes * depth;
+    let tile_calls = (multiply_adds / per_tile).max(TILES);
+    let best = (0..calls.max(1))
+        .map(|_| {
+            let t = Instant::now();
+            // SAFETY: `level()` chose an instruction set this CPU has.
+            let sums = rayon::broadcast(|_| at_level!(level, |V| unsafe { cached_tiles::<V>(depth, tile_calls) }));
+            std::hint::black_box(sums);
+            t.elapsed().as_secs_f64()
+        })
+        .fold(f64::INFINITY, f64::min);
+    let flops = 2.0 * (rayon::current_num_threads() * tile_calls * per_tile) as f64;
+    Some(flops / best / 1e9)
+}
+
+/// `calls` calls of the forward's in-place register tile ([`TileKernels::rows_times_panel`],
+/// all `MR` rows, two full vectors), cycling through [`TILES`] tiles of rows `depth` floats long,
+/// each adding into its own destination rows; returns the sum of the destinations, so that no
+/// call is dead code.
+///
+/// # Safety
+/// `V`'s instructions.
+unsafe fn cached_tiles<V: TileKernels>(depth: usize, calls: usize) -> f32 {
+    let (mr, nr) = (V::MR, 2 * V::LANES);
+    // Small values: thousands of calls sum to well inside f32's normal range.
+    let rows: Vec<f32> = (0..TILES * mr * depth).map(|i| (i % 7) as f32 * 1.0e-3).collect();
+    let panel: Vec<f32> = (0..depth * nr).map(|i| (i % 5) as f32 * 1.0e-3).collect();
+    let mut out = vec![0.0f32; TILES * mr * nr];
+    let sources: Vec<*const f32> = rows.chunks_exact(depth).map(<[f32]>::as_ptr).collect();
+    let destinations: Vec<*mut f32> = out.chunks_exact_mut(nr).map(<[f32]>::as_mut_ptr).collect();
+    by_rows!(mr, |R| {
+        for call in 0..calls {
+            let tile = call % TILES * R;
+            // SAFETY: each source row holds `depth` floats, the panel `depth` rows of two
+            // vectors, each destination two vectors.
+            unsafe { V::rows_times_panel::<R>(&sources[tile..tile + R], depth, panel.as_ptr(), &destinations[tile..tile + R], nr, true) };
+        }
+    });
+    out.iter().sum()
 }
 
 /// The chains' factor and addend: each chain decays slowly towards `B / (1 − M)`, staying a
@@ -100,6 +167,36 @@ mod tests {
         assert_eq!(peak_at(None, 1000, 1), None);
         for level in super::super::simd::supported() {
             let gflops = peak_at(Some(level), 100_000, 1).expect("a SIMD level");
+            assert!(gflops.is_finite() && gflops > 0.0, "{level:?}: {gflops}");
+        }
+    }
+
+    /// Each destination row of tile t ends as (calls of t) · Σ_kk row[kk] · panel[kk][j]: every
+    /// call ran, on its own tile's rows, and added into its own rows.
+    #[test]
+    fn cached_tiles_add_every_call_into_their_own_rows() {
+        let (depth, calls) = (37, 5);
+        for level in super::super::simd::supported() {
+            let (mr, nr): (usize, usize) = at_level!(level, |V| (V::MR, 2 * V::LANES));
+            let row = |r: usize, kk: usize| ((r * depth + kk) % 7) as f64 * 1.0e-3;
+            let panel = |kk: usize, j: usize| ((kk * nr + j) % 5) as f64 * 1.0e-3;
+            let want: f64 = (0..TILES * mr)
+                .map(|r| {
+                    let tile_calls = (calls + TILES - 1 - r / mr) / TILES;
+                    (0..nr).map(|j| tile_calls as f64 * (0..depth).map(|kk| row(r, kk) * panel(kk, j)).sum::<f64>()).sum::<f64>()
+                })
+                .sum();
+            let got = at_level!(level, |V| unsafe { cached_tiles::<V>(depth, calls) }) as f64;
+            assert!((got - want).abs() < 1e-5 * want, "{level:?}: {got}, want {want}");
+        }
+    }
+
+    #[test]
+    fn tile_rate_is_a_rate_on_simd_paths_and_none_otherwise() {
+        assert_eq!(tile_rate_at(None, 64, 1000, 1), None);
+        for level in super::super::simd::supported() {
+            assert_eq!(tile_rate_at(Some(level), 0, 1000, 1), None);
+            let gflops = tile_rate_at(Some(level), 64, 1_000_000, 1).expect("a SIMD level");
             assert!(gflops.is_finite() && gflops > 0.0, "{level:?}: {gflops}");
         }
     }
