@@ -101,10 +101,11 @@ struct KernelTimes {
     /// `fwd_bwd_ms` of the op minus the three kernels.
     fwd_bwd_overhead_ms: f64,
     /// The forward kernel's rate, and its register tile's alone on rows in cache at this depth
-    /// (`sparse_conv::tile_peak_gflops`; none on the general path): the gap between the two is
-    /// what the scattered rows cost.
+    /// and width (`sparse_conv::cached_tile_gflops`; none on the general path): the gap between
+    /// the two is what everything beyond the tile costs (the scene's rows, panels from L2,
+    /// partial tiles, packing, the output's allocation, scheduling).
     fwd_gflops: f64,
-    tile_peak_gflops: Option<f64>,
+    cached_tile_gflops: Option<f64>,
 }
 
 /// The scene tiled `scale` times, at the first channel count.
@@ -388,7 +389,7 @@ fn kernel_times(map: &KernelMap, c: usize, warmup: usize, runs: usize, op_fwd_ms
         fwd_overhead_ms: op_fwd_ms - fwd_ms,
         fwd_bwd_overhead_ms: op_fwd_bwd_ms - fwd_ms - input_grad_ms - weight_grad_ms,
         fwd_gflops: 2.0 * map.num_pairs() as f64 * (c * c) as f64 / fwd_ms / 1e6,
-        tile_peak_gflops: sparse_conv::tile_peak_gflops(c),
+        cached_tile_gflops: sparse_conv::cached_tile_gflops(c, c),
     }
 }
 
@@ -472,10 +473,10 @@ fn print_table(r: &Report) {
             "  C={}: kernels fwd {:.2} / input grad {:.2} / weight grad {:.2} ms; outside the kernels: fwd {:.2}, fwd+bwd {:.2} ms",
             row.c_in, k.fwd_ms, k.input_grad_ms, k.weight_grad_ms, k.fwd_overhead_ms, k.fwd_bwd_overhead_ms
         );
-        if let Some(tile) = k.tile_peak_gflops {
+        if let Some(tile) = k.cached_tile_gflops {
             let of_peak = r.fma_peak_gflops.map_or_else(String::new, |peak| format!(" ({:.0} % of the peak)", 100.0 * tile / peak));
             println!(
-                "         the forward's register tile on rows in cache: {tile:.1} GFLOP/s{of_peak}; the forward kernel on the scene's rows: {:.1} ({:.0} % of the tile's)",
+                "         the forward's register tile on rows in cache: {tile:.1} GFLOP/s{of_peak}; the forward kernel on the scene's rows: {:.1} GFLOP/s ({:.0} % of the tile's)",
                 k.fwd_gflops,
                 100.0 * k.fwd_gflops / tile
             );

@@ -31,5 +31,5 @@ pub use conv::{pair_conv, weight_grad};
 pub use element::{Element, PairDirection, RowEpilogue};
 pub(crate) use element::filled_in_chunks;
 pub(crate) use simd::Level;
-pub use peak::{fma_peak_gflops, tile_peak_gflops};
+pub use peak::{cached_tile_gflops, fma_peak_gflops};
 pub use simd::{cpu_features, cpu_kernel_path};

@@ -1,10 +1,11 @@
-//! The cores' f32 multiply-add peak at the width the op's kernels run, and what the op's own
-//! register tile reaches when memory costs nothing. The peak is chains of fused multiply-adds on
-//! registers alone, on every rayon thread at once: no kernel on these cores can pass it. The tile
-//! figure runs the forward's micro-kernel over and over on a few tiles' rows and one panel that
-//! stay in cache. The benchmarks give both beside the dense SGEMM ceiling and the op's own rate:
-//! from the peak to the cached tile is what the micro-kernel's instructions cost, from the cached
-//! tile to the op what its scattered rows (memory) cost.
+//! Two ceilings for the benchmarks, at the width the op's kernels run: the cores' f32
+//! multiply-add peak, and the rate of the op's own register tile when its data sits in cache. The
+//! peak is chains of fused multiply-adds on registers alone, on every rayon thread at once: no
+//! kernel on these cores can pass it. The cached tile runs the forward's micro-kernel over and
+//! over on a few tiles' rows and one panel that stay in cache. The benchmarks give both beside the
+//! dense SGEMM ceiling and the op's own rate: from the peak to the cached tile is what the
+//! micro-kernel's own instructions cost, from the cached tile to the op everything else it does
+//! (reaching the scene's rows, weight panels from L2, partial tiles, packing, scheduling).
 
 use std::time::Instant;
 
@@ -45,37 +46,44 @@ fn peak_at(level: Option<Level>, iterations: usize, calls: usize) -> Option<f64>
     Some(flops / best / 1e9)
 }
 
-/// Multiply-adds per thread in one timed call of the cached tile: some 30–90 ms on the cores we
+/// Multiply-adds per thread in one timed call of the cached tile: some 20–90 ms on the cores we
 /// target.
 const TILE_MULTIPLY_ADDS: usize = 2_000_000_000;
 
 /// Row tiles the cached-tile loop cycles through, as the op's tiles follow one another.
 const TILES: usize = 2;
 
-/// The f32 GFLOP/s of the forward's register tile ([`Simd::MR`] rows, two vectors wide) times
-/// a panel `depth` rows deep, added into its destination rows, on every rayon thread at once, with
-/// its source rows, panel and destinations in cache (L1 while `TILES` tiles' rows and a panel
-/// fit, L2 beyond); `None` where the kernels take the general path or `depth` is 0.
-pub fn tile_peak_gflops(depth: usize) -> Option<f64> {
-    tile_rate_at(level(), depth, TILE_MULTIPLY_ADDS, CALLS)
+/// Timed calls of the cached tile; the fastest counts. More than the peak's: a call is shorter,
+/// so one pause of the machine more easily spans every call.
+const TILE_CALLS: usize = 5;
+
+/// The f32 GFLOP/s of the forward's register tile ([`Simd::MR`] rows of `columns` ≤ two
+/// vectors) times a panel `depth` rows deep, added into its destination rows, on every rayon
+/// thread at once, with its source rows, panel and destinations in cache (L1 while `TILES`
+/// tiles' rows and a panel fit, L2 beyond): the op's rate without memory, to set the op's own
+/// rate against. Flops count the real columns only. `None` where the kernels take the general
+/// path, or `depth` or `columns` is 0.
+pub fn cached_tile_gflops(depth: usize, columns: usize) -> Option<f64> {
+    cached_tile_rate_at(level(), depth, columns, TILE_MULTIPLY_ADDS, TILE_CALLS)
 }
 
-/// [`tile_peak_gflops`] on `level`, with some `multiply_adds` per thread and call, the fastest
+/// [`cached_tile_gflops`] on `level`, with some `multiply_adds` per thread and call, the fastest
 /// of `calls`.
-fn tile_rate_at(level: Option<Level>, depth: usize, multiply_adds: usize, calls: usize) -> Option<f64> {
+fn cached_tile_rate_at(level: Option<Level>, depth: usize, columns: usize, multiply_adds: usize, calls: usize) -> Option<f64> {
     let level = level?;
-    if depth == 0 {
+    if depth == 0 || columns == 0 {
         return None;
     }
     let (lanes, mr): (usize, usize) = at_level!(level, |V| (V::LANES, V::MR));
-    let per_tile = mr * 2 * lanes * depth;
+    let columns = columns.min(2 * lanes);
+    let per_tile = mr * columns * depth;
     let tile_calls = (multiply_adds / per_tile).max(TILES);
     let best = (0..calls.max(1))
         .map(|_| {
             let t = Instant::now();
             // SAFETY: `level()` chose an instruction set this CPU has.
-            let sums = rayon::broadcast(|_| at_level!(level, |V| unsafe { cached_tiles::<V>(depth, tile_calls) }));
-            std::hint::black_box(sums);
+            let out = rayon::broadcast(|_| at_level!(level, |V| unsafe { cached_tiles::<V>(depth, columns, tile_calls) }));
+            std::hint::black_box(out);
             t.elapsed().as_secs_f64()
         })
         .fold(f64::INFINITY, f64::min);
@@ -84,15 +92,18 @@ fn tile_rate_at(level: Option<Level>, depth: usize, multiply_adds: usize, calls:
 }
 
 /// `calls` calls of the forward's in-place register tile ([`TileKernels::rows_times_panel`],
-/// all `MR` rows, two full vectors), cycling through [`TILES`] tiles of rows `depth` floats long,
-/// each adding into its own destination rows; returns the sum of the destinations, so that no
-/// call is dead code.
+/// all `MR` rows, the first `columns` of two vectors), cycling through [`TILES`] tiles of rows
+/// `depth` floats long, each adding into its own destination rows; returns the destination rows
+/// (`TILES·MR` rows of two vectors, zero past `columns`), so that no call is dead code.
 ///
 /// # Safety
 /// `V`'s instructions.
-unsafe fn cached_tiles<V: TileKernels>(depth: usize, calls: usize) -> f32 {
+unsafe fn cached_tiles<V: TileKernels>(depth: usize, columns: usize, calls: usize) -> Vec<f32> {
+    assert!(V::available(), "{} called on a CPU without them", V::NAME);
     let (mr, nr) = (V::MR, 2 * V::LANES);
-    // Small values: thousands of calls sum to well inside f32's normal range.
+    let columns = columns.min(nr);
+    // Small values: each call adds at most depth·36e-6 to an element, a sum far inside f32's
+    // normal range after the 10⁵–10⁷ calls of a timing.
     let rows: Vec<f32> = (0..TILES * mr * depth).map(|i| (i % 7) as f32 * 1.0e-3).collect();
     let panel: Vec<f32> = (0..depth * nr).map(|i| (i % 5) as f32 * 1.0e-3).collect();
     let mut out = vec![0.0f32; TILES * mr * nr];
@@ -100,13 +111,14 @@ unsafe fn cached_tiles<V: TileKernels>(depth: usize, calls: usize) -> f32 {
     let destinations: Vec<*mut f32> = out.chunks_exact_mut(nr).map(<[f32]>::as_mut_ptr).collect();
     by_rows!(mr, |R| {
         for call in 0..calls {
-            let tile = call % TILES * R;
+            let first_row = (call % TILES) * R;
+            let tile = first_row..first_row + R;
             // SAFETY: each source row holds `depth` floats, the panel `depth` rows of two
             // vectors, each destination two vectors.
-            unsafe { V::rows_times_panel::<R>(&sources[tile..tile + R], depth, panel.as_ptr(), &destinations[tile..tile + R], nr, true) };
+            unsafe { V::rows_times_panel::<R>(&sources[tile.clone()], depth, panel.as_ptr(), &destinations[tile], columns, true) };
         }
     });
-    out.iter().sum()
+    out
 }
 
 /// The chains' factor and addend: each chain decays slowly towards `B / (1 − M)`, staying a
@@ -171,32 +183,38 @@ mod tests {
         }
     }
 
-    /// Each destination row of tile t ends as (calls of t) · Σ_kk row[kk] · panel[kk][j]: every
-    /// call ran, on its own tile's rows, and added into its own rows.
+    /// Element (r, j) of tile t ends as (calls of t) · Σ_kk row_r[kk] · panel[kk][j] for the
+    /// first `columns` j, and zero past them: every call ran, on its own tile's rows, added into
+    /// its own destination rows, and wrote no column past the real ones.
     #[test]
     fn cached_tiles_add_every_call_into_their_own_rows() {
         let (depth, calls) = (37, 5);
         for level in super::super::simd::supported() {
             let (mr, nr): (usize, usize) = at_level!(level, |V| (V::MR, 2 * V::LANES));
-            let row = |r: usize, kk: usize| ((r * depth + kk) % 7) as f64 * 1.0e-3;
-            let panel = |kk: usize, j: usize| ((kk * nr + j) % 5) as f64 * 1.0e-3;
-            let want: f64 = (0..TILES * mr)
-                .map(|r| {
+            for columns in [nr, nr - 3] {
+                let row = |r: usize, kk: usize| ((r * depth + kk) % 7) as f64 * 1.0e-3;
+                let panel = |kk: usize, j: usize| ((kk * nr + j) % 5) as f64 * 1.0e-3;
+                let out = at_level!(level, |V| unsafe { cached_tiles::<V>(depth, columns, calls) });
+                assert_eq!(out.len(), TILES * mr * nr);
+                for r in 0..TILES * mr {
                     let tile_calls = (calls + TILES - 1 - r / mr) / TILES;
-                    (0..nr).map(|j| tile_calls as f64 * (0..depth).map(|kk| row(r, kk) * panel(kk, j)).sum::<f64>()).sum::<f64>()
-                })
-                .sum();
-            let got = at_level!(level, |V| unsafe { cached_tiles::<V>(depth, calls) }) as f64;
-            assert!((got - want).abs() < 1e-5 * want, "{level:?}: {got}, want {want}");
+                    for j in 0..nr {
+                        let want = if j < columns { tile_calls as f64 * (0..depth).map(|kk| row(r, kk) * panel(kk, j)).sum::<f64>() } else { 0.0 };
+                        let got = out[r * nr + j] as f64;
+                        assert!((got - want).abs() <= 1e-5 * want, "{level:?}, {columns} columns, ({r}, {j}): {got}, want {want}");
+                    }
+                }
+            }
         }
     }
 
     #[test]
-    fn tile_rate_is_a_rate_on_simd_paths_and_none_otherwise() {
-        assert_eq!(tile_rate_at(None, 64, 1000, 1), None);
+    fn cached_tile_rate_is_a_rate_on_simd_paths_and_none_otherwise() {
+        assert_eq!(cached_tile_rate_at(None, 64, 16, 1000, 1), None);
         for level in super::super::simd::supported() {
-            assert_eq!(tile_rate_at(Some(level), 0, 1000, 1), None);
-            let gflops = tile_rate_at(Some(level), 64, 1_000_000, 1).expect("a SIMD level");
+            assert_eq!(cached_tile_rate_at(Some(level), 0, 16, 1000, 1), None);
+            assert_eq!(cached_tile_rate_at(Some(level), 64, 0, 1000, 1), None);
+            let gflops = cached_tile_rate_at(Some(level), 64, 16, 1_000_000, 1).expect("a SIMD level");
             assert!(gflops.is_finite() && gflops > 0.0, "{level:?}: {gflops}");
         }
     }
