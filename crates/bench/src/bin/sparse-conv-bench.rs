@@ -100,10 +100,11 @@ struct KernelTimes {
     fwd_overhead_ms: f64,
     /// `fwd_bwd_ms` of the op minus the three kernels.
     fwd_bwd_overhead_ms: f64,
-    /// The forward kernel's rate, and its register tile's alone on rows in cache at this depth
-    /// and width (`sparse_conv::cached_tile_gflops`; none on the general path): the gap between
-    /// the two is what everything beyond the tile costs (the scene's rows, panels from L2,
-    /// partial tiles, packing, the output's allocation, scheduling).
+    /// The forward kernel's rate, and its register tile's alone on rows in cache at this depth,
+    /// one panel of min(C, two vectors) columns (`sparse_conv::cached_tile_gflops`; none on the
+    /// general path): the gap between the two is what everything beyond the tile costs (the
+    /// scene's rows, panels from L2, partial tiles and panels, packing, the output's allocation,
+    /// scheduling).
     fwd_gflops: f64,
     cached_tile_gflops: Option<f64>,
 }

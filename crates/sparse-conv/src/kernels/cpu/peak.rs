@@ -76,8 +76,10 @@ fn cached_tile_rate_at(level: Option<Level>, depth: usize, columns: usize, multi
     }
     let (lanes, mr): (usize, usize) = at_level!(level, |V| (V::LANES, V::MR));
     let columns = columns.min(2 * lanes);
+    // The kernel runs full-width FMAs whatever the real columns: size the calls by them, so that
+    // a timed call takes the same time at any width, and count the real columns' flops.
+    let tile_calls = (multiply_adds / (mr * 2 * lanes * depth)).max(TILES);
     let per_tile = mr * columns * depth;
-    let tile_calls = (multiply_adds / per_tile).max(TILES);
     let best = (0..calls.max(1))
         .map(|_| {
             let t = Instant::now();
@@ -102,8 +104,9 @@ unsafe fn cached_tiles<V: TileKernels>(depth: usize, columns: usize, calls: usiz
     assert!(V::available(), "{} called on a CPU without them", V::NAME);
     let (mr, nr) = (V::MR, 2 * V::LANES);
     let columns = columns.min(nr);
-    // Small values: each call adds at most depth·36e-6 to an element, a sum far inside f32's
-    // normal range after the 10⁵–10⁷ calls of a timing.
+    // Small values: a call adds at most depth·24e-6 to an element, so a timing's calls (about
+    // TILE_MULTIPLY_ADDS / (MR·2·LANES·depth) in all) add at most about 4,000 at any depth: far
+    // inside f32's normal range.
     let rows: Vec<f32> = (0..TILES * mr * depth).map(|i| (i % 7) as f32 * 1.0e-3).collect();
     let panel: Vec<f32> = (0..depth * nr).map(|i| (i % 5) as f32 * 1.0e-3).collect();
     let mut out = vec![0.0f32; TILES * mr * nr];
@@ -191,7 +194,9 @@ mod tests {
         let (depth, calls) = (37, 5);
         for level in super::super::simd::supported() {
             let (mr, nr): (usize, usize) = at_level!(level, |V| (V::MR, 2 * V::LANES));
-            for columns in [nr, nr - 3] {
+            // Full width; a partial second vector; a partial first one (nothing stored from the
+            // second); more than two vectors (clamped to two).
+            for columns in [nr, nr - 3, nr / 2 - 3, nr + 5] {
                 let row = |r: usize, kk: usize| ((r * depth + kk) % 7) as f64 * 1.0e-3;
                 let panel = |kk: usize, j: usize| ((kk * nr + j) % 5) as f64 * 1.0e-3;
                 let out = at_level!(level, |V| unsafe { cached_tiles::<V>(depth, columns, calls) });
