@@ -235,7 +235,7 @@ fn measure(args: &Args, scene_coords: &[sparse_conv::Coord]) -> anyhow::Result<R
         let (fwd, fwd_bwd) = time_op(&device, &map, c, args.warmup, args.runs, queue);
         let (fwd_ms, fwd_bwd_ms) = (fwd.median_ms, fwd_bwd.median_ms);
         let flop = 2.0 * pairs as f64 * c as f64 * c as f64;
-        let kernel = cpu.then(|| kernel_times(&map, c, args.warmup, args.runs, fwd_ms, fwd_bwd_ms));
+        let kernel = cpu.then(|| kernel_times(&map, c, flop, args.warmup, args.runs, fwd_ms, fwd_bwd_ms));
         results.push(Row {
             c_in: c,
             c_out: c,
@@ -369,8 +369,9 @@ fn device_matmul(device: &Device, size: usize, warmup: usize, runs: usize, queue
     GemmCeiling { size, ms, gflops: 2.0 * (size as f64).powi(3) / ms / 1e6 }
 }
 
-/// The three slice kernels timed on plain vectors, and the op's time around them.
-fn kernel_times(map: &KernelMap, c: usize, warmup: usize, runs: usize, op_fwd_ms: f64, op_fwd_bwd_ms: f64) -> KernelTimes {
+/// The three slice kernels timed on plain vectors, and the op's time around them; `flop` is one
+/// forward's.
+fn kernel_times(map: &KernelMap, c: usize, flop: f64, warmup: usize, runs: usize, op_fwd_ms: f64, op_fwd_bwd_ms: f64) -> KernelTimes {
     let (n, volume, pairs, centre) = (map.n_in(), map.volume(), map.pairs(), map.identity_offset());
     let values = |len: usize, scale: f32| -> Vec<f32> { (0..len).map(|i| ((i * 7919 % 2001) as f32 / 1000.0 - 1.0) * scale).collect() };
     let (x, w, g) = (values(n * c, 1.0), values(volume * c * c, 0.1), values(map.n_out() * c, 1.0));
@@ -389,7 +390,7 @@ fn kernel_times(map: &KernelMap, c: usize, warmup: usize, runs: usize, op_fwd_ms
         weight_grad_ms,
         fwd_overhead_ms: op_fwd_ms - fwd_ms,
         fwd_bwd_overhead_ms: op_fwd_bwd_ms - fwd_ms - input_grad_ms - weight_grad_ms,
-        fwd_gflops: 2.0 * map.num_pairs() as f64 * (c * c) as f64 / fwd_ms / 1e6,
+        fwd_gflops: flop / fwd_ms / 1e6,
         cached_tile_gflops: sparse_conv::cached_tile_gflops(c, c),
     }
 }

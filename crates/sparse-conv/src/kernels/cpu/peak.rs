@@ -33,17 +33,22 @@ pub fn fma_peak_gflops() -> Option<f64> {
 fn peak_at(level: Option<Level>, iterations: usize, calls: usize) -> Option<f64> {
     let level = level?;
     let lanes: usize = at_level!(level, |V| V::LANES);
-    let best = (0..calls.max(1))
-        .map(|_| {
-            let t = Instant::now();
-            // SAFETY: `level()` chose an instruction set this CPU has.
-            let sums = rayon::broadcast(|_| at_level!(level, |V| unsafe { V::fma_chains(iterations) }));
-            std::hint::black_box(sums);
-            t.elapsed().as_secs_f64()
-        })
-        .fold(f64::INFINITY, f64::min);
+    // SAFETY: `level()` chose an instruction set this CPU has.
+    let best = fastest_on_every_thread(calls, || at_level!(level, |V| unsafe { V::fma_chains(iterations) }));
     let flops = 2.0 * (rayon::current_num_threads() * CHAINS * lanes * iterations) as f64;
     Some(flops / best / 1e9)
+}
+
+/// Seconds of the fastest of `calls` runs of `work` on every rayon thread at once (the first run
+/// may start before the cores reach their clock); the results are kept from the optimiser.
+fn fastest_on_every_thread<T: Send>(calls: usize, work: impl Fn() -> T + Sync) -> f64 {
+    (0..calls.max(1))
+        .map(|_| {
+            let t = Instant::now();
+            std::hint::black_box(rayon::broadcast(|_| work()));
+            t.elapsed().as_secs_f64()
+        })
+        .fold(f64::INFINITY, f64::min)
 }
 
 /// Multiply-adds per thread in one timed call of the cached tile: some 20–90 ms on the cores we
@@ -80,15 +85,8 @@ fn cached_tile_rate_at(level: Option<Level>, depth: usize, columns: usize, multi
     // a timed call takes the same time at any width, and count the real columns' flops.
     let tile_calls = (multiply_adds / (mr * 2 * lanes * depth)).max(TILES);
     let per_tile = mr * columns * depth;
-    let best = (0..calls.max(1))
-        .map(|_| {
-            let t = Instant::now();
-            // SAFETY: `level()` chose an instruction set this CPU has.
-            let out = rayon::broadcast(|_| at_level!(level, |V| unsafe { cached_tiles::<V>(depth, columns, tile_calls) }));
-            std::hint::black_box(out);
-            t.elapsed().as_secs_f64()
-        })
-        .fold(f64::INFINITY, f64::min);
+    // SAFETY: `level()` chose an instruction set this CPU has.
+    let best = fastest_on_every_thread(calls, || at_level!(level, |V| unsafe { cached_tiles::<V>(depth, columns, tile_calls) }));
     let flops = 2.0 * (rayon::current_num_threads() * tile_calls * per_tile) as f64;
     Some(flops / best / 1e9)
 }
