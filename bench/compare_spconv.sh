@@ -73,6 +73,15 @@ for b in "${BACKEND_LIST[@]}"; do
     [[ $b == flex || $b == ndarray ]] || die "--backends: '$b' is not flex or ndarray"
 done
 
+# One comparison at a time on a machine: two at once share its cores and skew both sets of figures
+# without either noticing. The lock lasts as long as this script (and goes with it if it dies).
+LOCK=${TMPDIR:-/tmp}/pmunet-compare-spconv.lock
+if command -v flock > /dev/null && { [[ -e $LOCK ]] || : > "$LOCK"; } 2> /dev/null && { exec 9< "$LOCK"; } 2> /dev/null; then
+    flock -n 9 || die "another compare_spconv.sh is running on this machine (it holds $LOCK); wait for it to finish: two at once skew each other's figures"
+else
+    echo "[compare] warning: cannot lock $LOCK (no flock, or no access), so a second comparison started now would not be stopped" >&2
+fi
+
 [[ -f $SCENE ]] || die "scene file '$SCENE' not found (give --scene FILE.npy)"
 SCENE=$(cd "$(dirname "$SCENE")" && pwd)/$(basename "$SCENE")
 command -v cargo > /dev/null || die "cargo not found"
