@@ -5,12 +5,15 @@ use rand::Rng;
 use crate::augment::{AugmentConfig, Augmentation};
 use crate::box3d::Box3d;
 use crate::dataset::Frame;
+use crate::volume::Volume;
 use crate::voxelize::{VoxelConfig, Voxels, voxel_centre, voxelize};
 
 /// How one frame becomes a sample.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default)]
 pub struct SampleConfig {
+    /// Points outside are dropped first.
+    pub volume: Volume,
     /// Voxel size and pooling.
     pub voxel: VoxelConfig,
     /// Augmentation, `None` at evaluation.
@@ -24,14 +27,14 @@ pub struct SampleConfig {
 impl Default for SampleConfig {
     /// The training settings of the paper.
     fn default() -> Self {
-        Self { voxel: VoxelConfig::default(), augment: Some(AugmentConfig::default()), max_voxels: Some(30_000), keep_points: false }
+        Self { volume: Volume::default(), voxel: VoxelConfig::default(), augment: Some(AugmentConfig::default()), max_voxels: Some(30_000), keep_points: false }
     }
 }
 
 impl SampleConfig {
     /// Evaluation settings: no augmentation, no cap, the points kept.
     pub fn eval() -> Self {
-        Self { voxel: VoxelConfig::default(), augment: None, max_voxels: None, keep_points: true }
+        Self { volume: Volume::default(), voxel: VoxelConfig::default(), augment: None, max_voxels: None, keep_points: true }
     }
 }
 
@@ -48,16 +51,19 @@ pub struct Sample {
     pub boxes: Vec<Box3d>,
     /// `num_points` of each box (evaluation filters on it).
     pub num_points: Vec<i64>,
-    /// Points in the frame before voxelization.
+    /// Points in the frame before voxelization (inside the volume).
     pub n_points: usize,
+    /// Points dropped for lying outside the volume.
+    pub dropped_out_of_volume: usize,
     /// The (augmented) points themselves when [`SampleConfig::keep_points`], else empty.
     pub points: Vec<[f32; 3]>,
     /// The transform applied, if any.
     pub augmentation: Option<Augmentation>,
 }
 
-/// Augments, voxelizes and caps one frame.
+/// Crops to the volume, augments, voxelizes and caps one frame.
 pub fn prepare<R: Rng + ?Sized>(mut frame: Frame, cfg: &SampleConfig, rng: &mut R) -> Sample {
+    let dropped_out_of_volume = cfg.volume.crop(&mut frame.points);
     let augmentation = cfg.augment.map(|a| {
         let t = Augmentation::sample(&a, rng);
         t.apply_points(&mut frame.points);
@@ -75,6 +81,7 @@ pub fn prepare<R: Rng + ?Sized>(mut frame: Frame, cfg: &SampleConfig, rng: &mut 
         boxes: frame.boxes,
         num_points: frame.num_points,
         n_points: frame.points.len(),
+        dropped_out_of_volume,
         points: if cfg.keep_points { frame.points } else { Vec::new() },
         augmentation,
     }

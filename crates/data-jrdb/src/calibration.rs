@@ -93,7 +93,12 @@ impl Calibration {
     /// Reads `defaults.yaml`; other keys of the file are ignored.
     pub fn read(path: &Path) -> Result<Self> {
         let text = std::fs::read_to_string(path).map_err(|e| DataError::io(path, e))?;
-        let doc: Value = serde_norway::from_str(&text).map_err(|e| DataError::new(path, ErrorKind::Parse(e.to_string())))?;
+        Self::parse(&text, path)
+    }
+
+    /// Parses the text of a `defaults.yaml`; errors name `path`.
+    pub fn parse(text: &str, path: &Path) -> Result<Self> {
+        let doc: Value = serde_norway::from_str(text).map_err(|e| DataError::new(path, ErrorKind::Parse(e.to_string())))?;
         let entry = |name: &str| -> Result<LidarToBase> {
             let at = format!("calibrated.{name}");
             let node = doc.get("calibrated").and_then(|c| c.get(name)).ok_or_else(|| DataError::key(path, &at, "missing"))?;

@@ -7,7 +7,7 @@
 use std::path::Path;
 
 use crate::error::{DataError, ErrorKind, Result};
-use crate::pcd::{NonFinite, parse_pcd};
+use crate::pcd::{NonFinite, parse_pcd_within};
 
 /// A point-cloud file format.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -65,8 +65,44 @@ pub fn read_cloud(path: &Path) -> Result<Cloud> {
     parse_cloud(&bytes, format).map_err(|kind| DataError::new(path, kind))
 }
 
+/// Bounds on what one input may make a reader decode, checked before it is decoded: what a
+/// service bounds one request's memory with. Whatever the bounds, every size an input states
+/// (PCD's points, fields and compressed sizes, NPY's shape) is checked against the bytes present
+/// before memory is reserved for it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ReadLimits {
+    /// Most points (finite or not) a cloud may hold.
+    pub max_points: usize,
+    /// Most bytes its data may decode to (a compressed PCD's uncompressed size).
+    pub max_data_bytes: usize,
+}
+
+impl ReadLimits {
+    /// No bounds beyond the bytes present.
+    pub const NONE: Self = Self { max_points: usize::MAX, max_data_bytes: usize::MAX };
+
+    pub(crate) fn check_points(&self, n: usize) -> std::result::Result<(), ErrorKind> {
+        if n > self.max_points {
+            return Err(ErrorKind::OverLimit(format!("{n} points, more than the {} accepted", self.max_points)));
+        }
+        Ok(())
+    }
+
+    pub(crate) fn check_data_bytes(&self, n: usize) -> std::result::Result<(), ErrorKind> {
+        if n > self.max_data_bytes {
+            return Err(ErrorKind::OverLimit(format!("data of {n} bytes uncompressed, more than the {} accepted", self.max_data_bytes)));
+        }
+        Ok(())
+    }
+}
+
 /// Parses a cloud from bytes in `format`.
 pub fn parse_cloud(bytes: &[u8], format: CloudFormat) -> std::result::Result<Cloud, ErrorKind> {
+    parse_cloud_within(bytes, format, &ReadLimits::NONE)
+}
+
+/// As [`parse_cloud`], refusing a cloud beyond `limits` before it is decoded.
+pub fn parse_cloud_within(bytes: &[u8], format: CloudFormat, limits: &ReadLimits) -> std::result::Result<Cloud, ErrorKind> {
     let finite = |raw: Vec<[f32; 3]>| {
         let before = raw.len();
         let points: Vec<[f32; 3]> = raw.into_iter().filter(|p| p.iter().all(|v| v.is_finite())).collect();
@@ -75,16 +111,16 @@ pub fn parse_cloud(bytes: &[u8], format: CloudFormat) -> std::result::Result<Clo
     let (dropped_non_finite, points) = match format {
         // The PCD reader drops them itself.
         CloudFormat::Pcd => {
-            let pcd = parse_pcd(bytes, NonFinite::Drop)?;
+            let pcd = parse_pcd_within(bytes, NonFinite::Drop, limits, false)?;
             (pcd.dropped_non_finite, pcd.xyz)
         }
-        CloudFormat::KittiBin => finite(kitti_bin(bytes)?),
-        CloudFormat::Npy => finite(npy(bytes)?),
+        CloudFormat::KittiBin => finite(kitti_bin(bytes, limits)?),
+        CloudFormat::Npy => finite(npy(bytes, limits)?),
     };
     Ok(Cloud { points, dropped_non_finite, format })
 }
 
-fn kitti_bin(bytes: &[u8]) -> std::result::Result<Vec<[f32; 3]>, ErrorKind> {
+fn kitti_bin(bytes: &[u8], limits: &ReadLimits) -> std::result::Result<Vec<[f32; 3]>, ErrorKind> {
     const RECORD: usize = 16;
     if bytes.len() % RECORD != 0 {
         return Err(ErrorKind::Mismatch(format!(
@@ -94,13 +130,14 @@ fn kitti_bin(bytes: &[u8]) -> std::result::Result<Vec<[f32; 3]>, ErrorKind> {
             bytes.len() % RECORD
         )));
     }
+    limits.check_points(bytes.len() / RECORD)?;
     let f = |b: &[u8]| f32::from_le_bytes([b[0], b[1], b[2], b[3]]);
     Ok(bytes.chunks_exact(RECORD).map(|r| [f(&r[0..4]), f(&r[4..8]), f(&r[8..12])]).collect())
 }
 
 /// NumPy's `.npy` (format versions 1–3): the magic, a header length, a Python-literal header
 /// `{'descr': '<f4', 'fortran_order': False, 'shape': (N, 3), }`, then the data.
-fn npy(bytes: &[u8]) -> std::result::Result<Vec<[f32; 3]>, ErrorKind> {
+fn npy(bytes: &[u8], limits: &ReadLimits) -> std::result::Result<Vec<[f32; 3]>, ErrorKind> {
     let bad = |what: String| ErrorKind::Mismatch(format!("NPY: {what}"));
     let header_error = |what: &str| ErrorKind::Parse(format!("NPY header: {what}"));
     if !bytes.starts_with(b"\x93NUMPY") || bytes.len() < 10 {
@@ -136,9 +173,14 @@ fn npy(bytes: &[u8]) -> std::result::Result<Vec<[f32; 3]>, ErrorKind> {
         other => return Err(bad(format!("dtype `{other}`; expected little-endian float32 (<f4) or float64 (<f8)"))),
     };
     let data = &bytes[start + len..];
-    if data.len() != n * c * size {
-        return Err(ErrorKind::Truncated(format!("NPY data has {} bytes, its shape {n}×{c} of {size}-byte floats needs {}", data.len(), n * c * size)));
+    let need = n.checked_mul(c * size).ok_or_else(|| bad(format!("shape {n}×{c} of {size}-byte floats overflows")))?;
+    if data.len() < need {
+        return Err(ErrorKind::Truncated(format!("NPY data has {} bytes, its shape {n}×{c} of {size}-byte floats needs {need}", data.len())));
     }
+    if data.len() > need {
+        return Err(bad(format!("{} data bytes, its shape {n}×{c} of {size}-byte floats declares {need}", data.len())));
+    }
+    limits.check_points(n)?;
     let at = |i: usize| -> f32 {
         let b = &data[i * size..(i + 1) * size];
         if size == 4 { f32::from_le_bytes([b[0], b[1], b[2], b[3]]) } else { f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]) as f32 }

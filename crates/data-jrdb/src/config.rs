@@ -11,6 +11,7 @@ use crate::dataset::{DatasetConfig, OnBadFrame};
 use crate::pcd::NonFinite;
 use crate::sim::SimulateConfig;
 use crate::split::{DEFAULT_VAL_SEQUENCES, Split};
+use crate::volume::Volume;
 use crate::voxelize::{Pooling, VoxelConfig};
 
 /// Where the data is and how frames become samples (spec §1.2–§1.5).
@@ -30,6 +31,8 @@ pub struct DataConfig {
     /// The validation sequences (default: JRDB's 7, spec §1.2); an entry ending in `*` matches
     /// every sequence that starts with what precedes it (`sim-val-*` for a simulated benchmark).
     pub val_sequences: Vec<String>,
+    /// The working volume (metres, base frame): points outside are dropped before voxelization.
+    pub volume: Volume,
     /// Voxel size in metres (x, y, z).
     pub voxel_size: [f32; 3],
     /// A voxel's feature: the first point's xyz (the authors') or the mean.
@@ -54,6 +57,7 @@ impl Default for DataConfig {
             train_split: Split::Train,
             val_split: Split::Val,
             val_sequences: DEFAULT_VAL_SEQUENCES.map(String::from).to_vec(),
+            volume: Volume::default(),
             voxel_size: [0.05, 0.05, 0.1],
             pooling: Pooling::First,
             max_voxels: Some(30_000),
@@ -68,6 +72,7 @@ impl DataConfig {
     /// Per-frame processing of training samples.
     pub fn train_sample(&self) -> SampleConfig {
         SampleConfig {
+            volume: self.volume,
             voxel: VoxelConfig { voxel_size: self.voxel_size, pooling: self.pooling },
             augment: self.augment.enabled.then_some(AugmentConfig { scale: self.augment.scale, rotate: self.augment.rotate }),
             max_voxels: self.max_voxels.filter(|&m| m > 0),
@@ -77,7 +82,13 @@ impl DataConfig {
 
     /// Per-frame processing at evaluation: no augmentation, no cap, the points kept.
     pub fn eval_sample(&self) -> SampleConfig {
-        SampleConfig { voxel: VoxelConfig { voxel_size: self.voxel_size, pooling: self.pooling }, augment: None, max_voxels: None, keep_points: true }
+        SampleConfig {
+            volume: self.volume,
+            voxel: VoxelConfig { voxel_size: self.voxel_size, pooling: self.pooling },
+            augment: None,
+            max_voxels: None,
+            keep_points: true,
+        }
     }
 
     /// What opening `split` of the tree needs: the validation sequences, labels required,

@@ -24,12 +24,15 @@ pub enum ErrorKind {
     /// The PCD `DATA` line names an encoding we do not know.
     #[error("unknown PCD DATA `{0}` (expected ascii, binary or binary_compressed)")]
     UnknownData(String),
-    /// The data section ends before the header's point count is reached.
-    #[error("truncated PCD data: {0}")]
+    /// The data ends before the size its header states is reached.
+    #[error("truncated data: {0}")]
     Truncated(String),
-    /// The data section disagrees with the header (extra bytes, wrong column count, bad value).
-    #[error("PCD data does not match its header: {0}")]
+    /// The data disagrees with its header (extra bytes, wrong column count, bad value).
+    #[error("data does not match its header: {0}")]
     Mismatch(String),
+    /// A well-formed input larger than the reader was told to accept (a service's bound).
+    #[error("too large: {0}")]
+    OverLimit(String),
     /// A point with a NaN or infinite coordinate, under the strict policy.
     #[error("non-finite point: {0}")]
     NonFinite(String),

@@ -31,7 +31,12 @@ pub type SequenceLabels = BTreeMap<String, Vec<Label>>;
 /// Reads a `labels_3d` JSON file.
 pub fn read_labels(path: &Path) -> Result<SequenceLabels> {
     let text = std::fs::read_to_string(path).map_err(|e| DataError::io(path, e))?;
-    let doc: Value = serde_json::from_str(&text).map_err(|e| DataError::new(path, ErrorKind::Parse(e.to_string())))?;
+    parse_labels_json(&text, path)
+}
+
+/// Parses the text of a `labels_3d` JSON file; errors name `path`.
+pub fn parse_labels_json(text: &str, path: &Path) -> Result<SequenceLabels> {
+    let doc: Value = serde_json::from_str(text).map_err(|e| DataError::new(path, ErrorKind::Parse(e.to_string())))?;
     parse_labels(&doc).map_err(|(key, what)| DataError::key(path, key, what))
 }
 

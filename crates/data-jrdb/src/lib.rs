@@ -5,7 +5,7 @@
 //! - files: [`pcd`] (+ [`lzf`]), [`cloud`] (PCD, KITTI `.bin`, `.npy` for detection), [`labels`], [`calibration`], [`timestamps`], [`split`] (layout and
 //!   splits), [`dataset`] (`JrdbDataset`, `Frame`);
 //! - settings: [`config`] (`DataConfig`, the `[data]` table a run embeds);
-//! - batches: [`augment`] → [`voxelize`] → [`batch`] (`Sample`, `Batch`), driven by [`loader`];
+//! - batches: [`volume`] → [`augment`] → [`voxelize`] → [`batch`] (`Sample`, `Batch`), driven by [`loader`];
 //! - checks: [`stats`], [`convention`];
 //! - the built-in data: [`sim`] (`synth`).
 #![warn(missing_docs)]
@@ -44,6 +44,8 @@ pub mod split;
 pub mod stats;
 /// `frames_pc.json`.
 pub mod timestamps;
+/// The working volume points are cropped to.
+pub mod volume;
 /// Voxelization.
 pub mod voxelize;
 
@@ -51,7 +53,7 @@ pub use augment::{AugmentConfig, Augmentation};
 pub use batch::{Batch, Sample, SampleConfig, collate, prepare};
 pub use box3d::Box3d;
 pub use calibration::{Calibration, Lidar};
-pub use cloud::{Cloud, CloudFormat, parse_cloud, read_cloud};
+pub use cloud::{Cloud, CloudFormat, ReadLimits, parse_cloud, parse_cloud_within, read_cloud};
 pub use config::{AugmentSection, DataConfig};
 pub use dataset::{DatasetConfig, Frame, JrdbDataset, OnBadFrame};
 pub use error::{DataError, ErrorKind, Result};
@@ -59,4 +61,5 @@ pub use labels::Label;
 pub use loader::{Batches, Loader, LoaderConfig};
 pub use pcd::{Encoding, NonFinite, PointCloud, read_pcd};
 pub use split::{DEFAULT_VAL_SEQUENCES, Layout, Split};
+pub use volume::Volume;
 pub use voxelize::{Pooling, VoxelConfig, Voxels, voxelize};

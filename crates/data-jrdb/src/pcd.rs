@@ -7,6 +7,7 @@
 
 use std::path::Path;
 
+use crate::cloud::ReadLimits;
 use crate::error::{DataError, ErrorKind, Result};
 use crate::lzf;
 
@@ -180,6 +181,9 @@ struct Header {
     encoding: Encoding,
 }
 
+/// LZF's largest expansion: a 3-byte back-reference writes at most 264 bytes.
+const LZF_MAX_EXPANSION: usize = 88;
+
 fn parse_header(bytes: &[u8]) -> std::result::Result<(Header, usize), ErrorKind> {
     let bad = |s: String| ErrorKind::PcdHeader(s);
     let (mut names, mut sizes, mut types, mut counts) = (None, None, None, None);
@@ -241,18 +245,19 @@ fn parse_header(bytes: &[u8]) -> std::result::Result<(Header, usize), ErrorKind>
                 for (((name, &size), ty), &count) in names.iter().zip(&sizes).zip(&types).zip(&counts) {
                     let ty = FieldType::from_header(ty, size)
                         .ok_or_else(|| bad(format!("field `{name}`: TYPE {ty} with SIZE {size} is not supported")))?;
-                    if count == 0 {
-                        return Err(bad(format!("field `{name}` has COUNT 0")));
-                    }
                     fields.push(Field { name: name.clone(), ty, count });
                 }
                 for axis in ["x", "y", "z"] {
-                    if !fields.iter().any(|f| f.name == axis) {
-                        return Err(bad(format!("no `{axis}` field")));
+                    match fields.iter().find(|f| f.name == axis) {
+                        None => return Err(bad(format!("no `{axis}` field"))),
+                        Some(f) if f.count == 0 => return Err(bad(format!("field `{axis}` has COUNT 0"))),
+                        Some(_) => {}
                     }
                 }
                 let wh = match (width, height) {
-                    (Some(w), Some(h)) => Some(w * h),
+                    (Some(w), Some(h)) => {
+                        Some(w.checked_mul(h).ok_or_else(|| bad(format!("WIDTH {w} x HEIGHT {h} overflows")))?)
+                    }
                     (Some(w), None) => Some(w),
                     _ => None,
                 };
@@ -271,52 +276,144 @@ fn parse_header(bytes: &[u8]) -> std::result::Result<(Header, usize), ErrorKind>
     }
 }
 
+/// Where each field lives: in a binary record (bytes) and in an ascii line (values).
+struct RecordLayout {
+    /// Byte offset of each field's first element in a `binary` record.
+    byte: Vec<usize>,
+    /// Bytes per point.
+    record: usize,
+    /// Values per point (the sum of the COUNTs).
+    values: usize,
+}
+
+impl RecordLayout {
+    fn of(fields: &[Field]) -> std::result::Result<Self, ErrorKind> {
+        let too_big = || ErrorKind::PcdHeader("the fields' SIZE x COUNT overflows".into());
+        let (mut byte, mut record, mut values) = (Vec::with_capacity(fields.len()), 0usize, 0usize);
+        for f in fields {
+            byte.push(record);
+            record = f.count.checked_mul(f.ty.size()).and_then(|b| record.checked_add(b)).ok_or_else(too_big)?;
+            values = values.checked_add(f.count).ok_or_else(too_big)?;
+        }
+        Ok(Self { byte, record, values })
+    }
+}
+
+/// Collects the kept points as they are decoded: xyz and the first element of every other named
+/// field (PCL's `_` padding and COUNT 0 fields carry nothing).
+struct Points<'h> {
+    fields: &'h [Field],
+    axes: [usize; 3],
+    extras: Vec<usize>,
+    non_finite: NonFinite,
+    xyz: Vec<[f32; 3]>,
+    extra: Vec<(String, Vec<f32>)>,
+    dropped: usize,
+}
+
+impl<'h> Points<'h> {
+    /// `capacity` must be justified by bytes already present (see the callers).
+    fn new(fields: &'h [Field], non_finite: NonFinite, capacity: usize, keep_extras: bool) -> Self {
+        let find = |axis: &str| fields.iter().position(|f| f.name == axis).expect("parse_header checked x, y, z");
+        let axes = [find("x"), find("y"), find("z")];
+        let extras: Vec<usize> = (0..fields.len())
+            .filter(|&i| keep_extras && !["x", "y", "z", "_"].contains(&fields[i].name.as_str()) && fields[i].count > 0)
+            .collect();
+        let extra = extras.iter().map(|&i| (fields[i].name.clone(), Vec::with_capacity(capacity))).collect();
+        Self { fields, axes, extras, non_finite, xyz: Vec::with_capacity(capacity), extra, dropped: 0 }
+    }
+
+    /// Adds point `i`, whose field `f`'s first element is `first(f)`.
+    fn push(&mut self, i: usize, first: impl Fn(usize) -> f64) -> std::result::Result<(), ErrorKind> {
+        let p = self.axes.map(|a| first(a) as f32);
+        if !p.iter().all(|v| v.is_finite()) {
+            if self.non_finite == NonFinite::Error {
+                return Err(ErrorKind::NonFinite(format!("point {i} is ({}, {}, {})", p[0], p[1], p[2])));
+            }
+            self.dropped += 1;
+            return Ok(());
+        }
+        self.xyz.push(p);
+        for (k, &f) in self.extras.iter().enumerate() {
+            self.extra[k].1.push(first(f) as f32);
+        }
+        Ok(())
+    }
+
+    fn finish(self, encoding: Encoding) -> PointCloud {
+        PointCloud { fields: self.fields.to_vec(), encoding, xyz: self.xyz, extra: self.extra, dropped_non_finite: self.dropped }
+    }
+}
+
 /// Parses the bytes of a PCD file; errors carry no path (see [`read_pcd`]).
+///
+/// Every size the header states is checked against the bytes present, with overflow-checked
+/// arithmetic, before memory is reserved for it: the points kept never take more than about four
+/// times the data section, or its stated uncompressed size (itself at most LZF's 88-fold
+/// expansion of the compressed block).
 pub fn parse_pcd(bytes: &[u8], non_finite: NonFinite) -> std::result::Result<PointCloud, ErrorKind> {
+    parse_pcd_within(bytes, non_finite, &ReadLimits::NONE, true)
+}
+
+/// As [`parse_pcd`] under `limits`, with the fields other than x, y, z kept or not.
+pub(crate) fn parse_pcd_within(
+    bytes: &[u8],
+    non_finite: NonFinite,
+    limits: &ReadLimits,
+    keep_extras: bool,
+) -> std::result::Result<PointCloud, ErrorKind> {
     let (h, start) = parse_header(bytes)?;
     let data = &bytes[start..];
     let n = h.points;
-    let width: usize = h.fields.iter().map(|f| f.count).sum();
-    // Column index (in the flattened value list of one point) of each field's first element.
-    let mut first = Vec::with_capacity(h.fields.len());
-    let mut acc = 0;
-    for f in &h.fields {
-        first.push(acc);
-        acc += f.count;
-    }
-    // All values as f64, point-major: values[i * width + k].
-    let mut values = vec![0f64; n * width];
-    match h.encoding {
+    limits.check_points(n)?;
+    let layout = RecordLayout::of(&h.fields)?;
+    let rec = layout.record;
+    let record_bytes = || {
+        rec.checked_mul(n).ok_or_else(|| ErrorKind::PcdHeader(format!("{n} points x {rec} bytes overflows")))
+    };
+    let pc = match h.encoding {
         Encoding::Ascii => {
+            // Every value takes a character and a separator: n points need 2·n·values − 1 bytes.
+            let need = n.checked_mul(layout.values).and_then(|v| v.checked_mul(2)).map(|v| v.saturating_sub(1));
+            if need.is_none_or(|need| need > data.len()) {
+                return Err(ErrorKind::Truncated(format!(
+                    "ascii data of {} bytes cannot hold the {n} points of {} values the header declares",
+                    data.len(),
+                    layout.values
+                )));
+            }
             let text = std::str::from_utf8(data).map_err(|_| ErrorKind::Mismatch("ascii data is not text".into()))?;
+            let mut points = Points::new(&h.fields, non_finite, n, keep_extras);
             let mut lines = text.lines().map(str::trim).filter(|l| !l.is_empty());
+            let mut first = vec![0f64; h.fields.len()];
             for i in 0..n {
-                let line = lines
-                    .next()
-                    .ok_or_else(|| ErrorKind::Truncated(format!("{i} of {n} points present")))?;
+                let line = lines.next().ok_or_else(|| ErrorKind::Truncated(format!("{i} of {n} points present")))?;
                 let mut toks = line.split_whitespace();
                 for (fi, f) in h.fields.iter().enumerate() {
                     for c in 0..f.count {
                         let tok = toks.next().ok_or_else(|| {
-                            ErrorKind::Mismatch(format!("point {i} has fewer than the {width} values the header declares"))
+                            ErrorKind::Mismatch(format!("point {i} has fewer than the {} values the header declares", layout.values))
                         })?;
                         let v = parse_ascii(tok, f.ty).ok_or_else(|| {
                             ErrorKind::Mismatch(format!("point {i}: `{tok}` is not a valid {}{} value", f.ty.letter(), f.ty.size()))
                         })?;
-                        values[i * width + first[fi] + c] = v;
+                        if c == 0 {
+                            first[fi] = v;
+                        }
                     }
                 }
                 if toks.next().is_some() {
-                    return Err(ErrorKind::Mismatch(format!("point {i} has more than the {width} values the header declares")));
+                    return Err(ErrorKind::Mismatch(format!("point {i} has more than the {} values the header declares", layout.values)));
                 }
+                points.push(i, |f| first[f])?;
             }
             if lines.next().is_some() {
                 return Err(ErrorKind::Mismatch(format!("more lines than the {n} points the header declares")));
             }
+            points.finish(h.encoding)
         }
         Encoding::Binary => {
-            let rec: usize = h.fields.iter().map(|f| f.ty.size() * f.count).sum();
-            let need = rec * n;
+            let need = record_bytes()?;
             if data.len() < need {
                 return Err(ErrorKind::Truncated(format!(
                     "{} data bytes, the header needs {need} ({n} points x {rec} bytes)",
@@ -329,15 +426,12 @@ pub fn parse_pcd(bytes: &[u8], non_finite: NonFinite) -> std::result::Result<Poi
                     data.len()
                 )));
             }
+            let mut points = Points::new(&h.fields, non_finite, n, keep_extras);
             for i in 0..n {
-                let mut off = i * rec;
-                for (fi, f) in h.fields.iter().enumerate() {
-                    for c in 0..f.count {
-                        values[i * width + first[fi] + c] = f.ty.decode(&data[off..]);
-                        off += f.ty.size();
-                    }
-                }
+                let at = i * rec;
+                points.push(i, |f| h.fields[f].ty.decode(&data[at + layout.byte[f]..]))?;
             }
+            points.finish(h.encoding)
         }
         Encoding::BinaryCompressed => {
             if data.len() < 8 {
@@ -345,11 +439,11 @@ pub fn parse_pcd(bytes: &[u8], non_finite: NonFinite) -> std::result::Result<Poi
             }
             let csize = u32::from_le_bytes(data[0..4].try_into().unwrap()) as usize;
             let usize_ = u32::from_le_bytes(data[4..8].try_into().unwrap()) as usize;
-            let rec: usize = h.fields.iter().map(|f| f.ty.size() * f.count).sum();
-            if usize_ != rec * n {
+            let need = record_bytes()?;
+            limits.check_data_bytes(need)?;
+            if usize_ != need {
                 return Err(ErrorKind::Mismatch(format!(
-                    "uncompressed size {usize_} but the header declares {} ({n} points x {rec} bytes)",
-                    rec * n
+                    "uncompressed size {usize_} but the header declares {need} ({n} points x {rec} bytes)"
                 )));
             }
             let body = &data[8..];
@@ -362,42 +456,25 @@ pub fn parse_pcd(bytes: &[u8], non_finite: NonFinite) -> std::result::Result<Poi
                     body.len() - csize
                 )));
             }
+            if usize_ > csize.saturating_mul(LZF_MAX_EXPANSION) {
+                return Err(ErrorKind::Mismatch(format!(
+                    "uncompressed size {usize_} cannot come from a {csize}-byte LZF block (at most {LZF_MAX_EXPANSION} times larger)"
+                )));
+            }
             let raw = if usize_ == 0 { Vec::new() } else { lzf::decompress(&body[..csize], usize_).map_err(ErrorKind::Mismatch)? };
-            let mut off = 0;
-            for (fi, f) in h.fields.iter().enumerate() {
-                for i in 0..n {
-                    for c in 0..f.count {
-                        values[i * width + first[fi] + c] = f.ty.decode(&raw[off..]);
-                        off += f.ty.size();
-                    }
-                }
+            // Field f's column holds every point's elements: point i's first one is at
+            // n·byte[f] + i·count·size.
+            let mut points = Points::new(&h.fields, non_finite, n, keep_extras);
+            for i in 0..n {
+                points.push(i, |f| {
+                    let fd = &h.fields[f];
+                    h.fields[f].ty.decode(&raw[n * layout.byte[f] + i * fd.count * fd.ty.size()..])
+                })?;
             }
+            points.finish(h.encoding)
         }
-    }
-
-    let col = |name: &str| first[h.fields.iter().position(|f| f.name == name).unwrap()];
-    let (cx, cy, cz) = (col("x"), col("y"), col("z"));
-    let extras: Vec<usize> = (0..h.fields.len()).filter(|&i| !["x", "y", "z"].contains(&h.fields[i].name.as_str())).collect();
-    let mut xyz = Vec::with_capacity(n);
-    let mut extra: Vec<(String, Vec<f32>)> =
-        extras.iter().map(|&i| (h.fields[i].name.clone(), Vec::with_capacity(n))).collect();
-    let mut dropped = 0;
-    for i in 0..n {
-        let row = &values[i * width..(i + 1) * width];
-        let p = [row[cx] as f32, row[cy] as f32, row[cz] as f32];
-        if !p.iter().all(|v| v.is_finite()) {
-            if non_finite == NonFinite::Error {
-                return Err(ErrorKind::NonFinite(format!("point {i} is ({}, {}, {})", p[0], p[1], p[2])));
-            }
-            dropped += 1;
-            continue;
-        }
-        xyz.push(p);
-        for (k, &fi) in extras.iter().enumerate() {
-            extra[k].1.push(row[first[fi]] as f32);
-        }
-    }
-    Ok(PointCloud { fields: h.fields, encoding: h.encoding, xyz, extra, dropped_non_finite: dropped })
+    };
+    Ok(pc)
 }
 
 fn parse_ascii(tok: &str, ty: FieldType) -> Option<f64> {

@@ -124,7 +124,9 @@ fn malformed_files_are_errors_naming_the_file() {
     expect("corrupt_comp.pcd", &corrupt, |k| matches!(k, ErrorKind::Mismatch(_) | ErrorKind::Truncated(_)));
     expect("unknown_data.pcd", (header(3, "binary_lzma") + "xx").as_bytes(), |k| matches!(k, ErrorKind::UnknownData(_)));
     expect("trunc_ascii.pcd", (header(3, "ascii") + "0 1 2 3 0\n").as_bytes(), |k| matches!(k, ErrorKind::Truncated(_)));
-    expect("short_row.pcd", (header(1, "ascii") + "0 1 2 3\n").as_bytes(), |k| matches!(k, ErrorKind::Mismatch(_)));
+    // Too short to hold the declared values at all: refused before any line is read.
+    expect("short_file.pcd", (header(1, "ascii") + "0 1 2 3\n").as_bytes(), |k| matches!(k, ErrorKind::Truncated(_)));
+    expect("short_row.pcd", (header(2, "ascii") + "0 1 2 3\n0 1 2 3 4 5 6\n").as_bytes(), |k| matches!(k, ErrorKind::Mismatch(_)));
     expect("long_row.pcd", (header(1, "ascii") + "0 1 2 3 4 5\n").as_bytes(), |k| matches!(k, ErrorKind::Mismatch(_)));
     expect("bad_value.pcd", (header(1, "ascii") + "0 1 two 3 4\n").as_bytes(), |k| matches!(k, ErrorKind::Mismatch(_)));
     expect("extra_rows.pcd", (header(1, "ascii") + "0 1 2 3 4\n0 1 2 3 4\n").as_bytes(), |k| matches!(k, ErrorKind::Mismatch(_)));

@@ -208,6 +208,7 @@ impl RunConfig {
         if self.data.voxel_size.iter().any(|&v| !(v > 0.0)) {
             bail!("data.voxel_size must be positive, got {:?}", self.data.voxel_size);
         }
+        self.data.volume.validate(self.data.voxel_size).map_err(anyhow::Error::msg)?;
         self.train.schedule.validate()?;
         self.model.validate().map_err(anyhow::Error::msg)?;
         Ok(())

@@ -69,6 +69,10 @@ pub struct FrameReport {
     pub points: usize,
     /// Points dropped for a non-finite coordinate.
     pub dropped_non_finite: usize,
+    /// Finite points dropped for lying outside the run's working volume (`data.volume`, in the
+    /// base frame): far and max-range returns.
+    #[serde(default)]
+    pub dropped_out_of_volume: usize,
     /// The input frame's pose in JRDB's base frame (`x=…,y=…,z=…,yaw=…` degrees).
     pub pose: String,
     /// Boxes scoring at least `score_threshold`, best first, in the input's frame.
@@ -86,21 +90,33 @@ pub struct Found {
     pub base: Vec<Detection>,
     /// The same detections in the input's frame.
     pub input: Vec<Detection>,
+    /// Points dropped for lying outside the run's working volume.
+    pub dropped_out_of_volume: usize,
 }
 
-/// Moves `points` into the base frame with `pose`, detects, keeps the boxes scoring at least
-/// `score_threshold` (after the run's own post-processing, so the boxes are those `infer` scores) and
-/// moves them back.
+/// Moves `points` into the base frame with `pose`, drops those outside the run's working volume,
+/// detects, keeps the boxes scoring at least `score_threshold` (after the run's own
+/// post-processing, so the boxes are those `infer` scores) and moves them back.
 pub fn find_people(detector: &RunDetector, points: &[[f32; 3]], pose: &SensorPose, score_threshold: f64) -> Found {
-    let base_points: Vec<[f32; 3]> = if pose.is_identity() { points.to_vec() } else { points.iter().map(|&p| pose.to_base(p)).collect() };
+    let mut base_points: Vec<[f32; 3]> = if pose.is_identity() { points.to_vec() } else { points.iter().map(|&p| pose.to_base(p)).collect() };
+    let dropped_out_of_volume = detector.config().data.volume.crop(&mut base_points);
     if base_points.is_empty() {
-        return Found::default();
+        return Found { dropped_out_of_volume, ..Found::default() };
     }
     let found = detector.detect(&base_points);
     let base: Vec<Detection> =
         found.boxes.iter().zip(&found.scores).map(|(b, &s)| Detection { bbox: *b, score: s as f64 }).filter(|d| d.score >= score_threshold).collect();
     let input = base.iter().map(|d| Detection { bbox: pose.box_to_input(&d.bbox), score: d.score }).collect();
-    Found { base_points, base, input }
+    Found { base_points, base, input, dropped_out_of_volume }
+}
+
+/// What a caught panic said, for a message naming the input it happened on.
+pub fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
+    payload
+        .downcast_ref::<&str>()
+        .map(|s| s.to_string())
+        .or_else(|| payload.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "a panic without a message".into())
 }
 
 /// The short name of a cloud format, as reports give it.
@@ -253,7 +269,10 @@ pub fn detect(detector: &RunDetector, inputs: &[Input], opts: &DetectOptions) ->
     let mut summary = DetectSummary::default();
     let start = Instant::now();
     for input in inputs {
-        match detect_one(detector, input, opts) {
+        // A panic on one input (inside the model, say) fails that input alone.
+        let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| detect_one(detector, input, opts)))
+            .unwrap_or_else(|payload| Err(anyhow::anyhow!("the detector failed on this cloud: {}", panic_message(&*payload))));
+        match outcome {
             Ok((n, secs)) => {
                 summary.frames += 1;
                 summary.boxes += n;
@@ -290,6 +309,7 @@ fn detect_one(detector: &RunDetector, input: &Input, opts: &DetectOptions) -> Re
         format: format.into(),
         points: points.len(),
         dropped_non_finite: dropped,
+        dropped_out_of_volume: found.dropped_out_of_volume,
         pose: pose.to_string(),
         detections: found.input.iter().map(|d| BoxRecord::new(&d.bbox, d.score)).collect(),
         score_threshold: opts.score_threshold,

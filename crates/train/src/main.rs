@@ -201,6 +201,21 @@ enum Cmd {
         /// Requests that may wait for the model at once (more wait for room).
         #[arg(long, default_value_t = 64)]
         queue: usize,
+        /// Most points a cloud may hold (more get 413, refused from the header before decoding).
+        #[arg(long, default_value_t = 2_000_000)]
+        max_points: usize,
+        /// Memory, in MiB, that the requests in flight may reserve together: each reserves 5 times
+        /// its body until it is answered, and more wait for room. At least 5 x --max-body-mb.
+        #[arg(long, default_value_t = 1024.0)]
+        memory_budget_mb: f64,
+        /// Longest a request may take, in seconds, from arrival to answer (an answer not ready
+        /// by then: 503).
+        #[arg(long, default_value_t = 60.0)]
+        timeout_s: f64,
+        /// Longest a client may take, in seconds, to send its body (a body not received by then:
+        /// 408; a slow or stalled sender holds its reservation no longer).
+        #[arg(long, default_value_t = 30.0)]
+        read_timeout_s: f64,
     },
     /// Run a sweep file: variants × seeds, then results.csv, results.md and curves.png.
     Sweep {
@@ -408,9 +423,19 @@ fn main() -> ExitCode {
             }
             Ok(())
         })(),
-        Some(Cmd::Serve { model, addr, max_body_mb, queue }) => (|| -> Result<()> {
+        Some(Cmd::Serve { model, addr, max_body_mb, queue, max_points, memory_budget_mb, timeout_s, read_timeout_s }) => (|| -> Result<()> {
             model.prepare()?;
-            anyhow::ensure!(max_body_mb > 0.0, "--max-body-mb must be positive");
+            anyhow::ensure!(max_body_mb > 0.0 && max_body_mb.is_finite(), "--max-body-mb must be positive");
+            anyhow::ensure!(max_points > 0, "--max-points must be at least 1");
+            let per_body = train::serve::RESERVE_PER_BODY_BYTE as f64;
+            anyhow::ensure!(
+                memory_budget_mb.is_finite() && memory_budget_mb >= per_body * max_body_mb,
+                "--memory-budget-mb ({memory_budget_mb}) must hold at least one largest request: {per_body} x --max-body-mb = {}",
+                per_body * max_body_mb
+            );
+            for (name, s) in [("--timeout-s", timeout_s), ("--read-timeout-s", read_timeout_s)] {
+                anyhow::ensure!(s > 0.0 && s <= 86_400.0, "{name} must lie in (0, 86400]");
+            }
             let opts = ServeOptions {
                 run: model.run.clone(),
                 checkpoint: model.slot(),
@@ -420,6 +445,10 @@ fn main() -> ExitCode {
                 score_threshold: model.score_threshold,
                 pose: model.transform,
                 queue,
+                max_points,
+                memory_budget_bytes: (memory_budget_mb * 1024.0 * 1024.0) as usize,
+                timeout: std::time::Duration::from_secs_f64(timeout_s),
+                read_timeout: std::time::Duration::from_secs_f64(read_timeout_s),
             };
             train::serve::serve(&opts)
         })(),

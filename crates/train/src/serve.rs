@@ -3,9 +3,18 @@
 //! ```text
 //! POST /detect[?format=pcd|bin|npy][&render=1][&score_threshold=0.5]   body: one point cloud
 //!      → 200 application/json FrameReport (or image/png with render=1)
-//!      → 400 malformed cloud, bad query · 413 body over --max-body-mb · 415 format not recognised
+//!      → 400 malformed cloud, bad query · 408 body not received in time · 413 body over
+//!        --max-body-mb or cloud over --max-points · 415 format not recognised · 503 no room or
+//!        no answer in time
 //! GET  /health → 200 {"status": "ok", "model": …, "backend": …, …}
 //! ```
+//!
+//! What clients can take is bounded: each body at most `--max-body-mb`, each cloud at most
+//! `--max-points` (checked from its header before it is decoded), all requests together at most
+//! `--memory-budget-mb` (a request reserves [`RESERVE_PER_BODY_BYTE`] times its announced body
+//! before reading it and holds that until it is answered; others wait for room), and each request
+//! ends within `--timeout-s`. SIGTERM or Ctrl-C stops accepting, lets the requests in flight
+//! finish, and exits 0.
 //!
 //! The body's format comes from the body where it carries a signature (PCD's header, NPY's magic),
 //! else from `format=`, else from the content type (`application/x-pcd`, `application/x-npy`,
@@ -16,7 +25,9 @@
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
-use std::time::Instant;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
 use axum::Router;
@@ -26,14 +37,14 @@ use axum::http::{HeaderMap, StatusCode, header};
 use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
 use axum::routing::{get, post};
-use data_jrdb::{CloudFormat, parse_cloud};
+use data_jrdb::{CloudFormat, ErrorKind, ReadLimits, parse_cloud_within};
 use serde::Deserialize;
 use serde_json::json;
-use tokio::sync::{mpsc, oneshot};
+use tokio::sync::{Semaphore, mpsc, oneshot};
 
 use crate::backend::BackendKind;
 use crate::checkpoint::Slot;
-use crate::detect::{BoxRecord, FrameReport, find_people, format_name};
+use crate::detect::{BoxRecord, FrameReport, find_people, format_name, panic_message};
 use crate::detector::RunDetector;
 use crate::render::render_bev_png;
 use crate::sensor_pose::SensorPose;
@@ -58,6 +69,14 @@ pub struct ServeOptions {
     pub pose: SensorPose,
     /// Requests waiting for the model beyond this many wait for room (back-pressure).
     pub queue: usize,
+    /// Clouds of more points than this get 413, refused from their header before decoding.
+    pub max_points: usize,
+    /// Bytes all requests in flight may reserve together (see [`RESERVE_PER_BODY_BYTE`]).
+    pub memory_budget_bytes: usize,
+    /// Longest a request may take from its arrival to its answer.
+    pub timeout: Duration,
+    /// Longest a client may take to send its body (counted from its arrival).
+    pub read_timeout: Duration,
 }
 
 /// One inference for the model thread.
@@ -70,8 +89,14 @@ struct Job {
     reply: oneshot::Sender<Result<Answer, String>>,
 }
 
+/// Set once a request's body has been read: a time-out before then is the client's (408),
+/// after it the service's (503).
+#[derive(Clone, Default)]
+struct BodyRead(Arc<AtomicBool>);
+
 enum Answer {
-    Boxes(Vec<BoxRecord>),
+    /// The boxes and the points dropped outside the working volume.
+    Boxes(Vec<BoxRecord>, usize),
     Png(Vec<u8>),
 }
 
@@ -81,18 +106,43 @@ struct AppState {
     health: serde_json::Value,
     score_threshold: f64,
     pose: SensorPose,
+    limits: ReadLimits,
+    max_body_bytes: usize,
+    /// The memory budget, one permit per KiB.
+    budget: Arc<Semaphore>,
+    budget_kib: usize,
+    timeout: Duration,
+    read_timeout: Duration,
 }
 
+/// What a request reserves of the memory budget per byte of body, until it is answered: the body
+/// itself, and the cloud parsed from it, whose points take at most four times their bytes (a
+/// compressed PCD may decode to no more than a body may hold).
+pub const RESERVE_PER_BODY_BYTE: usize = 5;
+
 /// Loads the model, binds `opts.addr`, prints `listening on http://ADDR` on stdout (the port
-/// chosen when it is 0) and serves until Ctrl-C.
+/// chosen when it is 0) and serves until SIGTERM or Ctrl-C, after which the requests in flight
+/// are answered before it returns.
 pub fn serve(opts: &ServeOptions) -> Result<()> {
     let (jobs, rx) = mpsc::channel::<Job>(opts.queue.max(1));
     let health = start_model_thread(opts, rx)?;
     let runtime = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().context("starting the tokio runtime")?;
     runtime.block_on(async move {
-        let state = AppState { jobs, health, score_threshold: opts.score_threshold, pose: opts.pose };
+        let state = AppState {
+            jobs,
+            health,
+            score_threshold: opts.score_threshold,
+            pose: opts.pose,
+            // A compressed body may decode to no more than a body may hold.
+            limits: ReadLimits { max_points: opts.max_points, max_data_bytes: opts.max_body_bytes },
+            max_body_bytes: opts.max_body_bytes,
+            budget: Arc::new(Semaphore::new(opts.memory_budget_bytes.div_ceil(1024).min(Semaphore::MAX_PERMITS))),
+            budget_kib: opts.memory_budget_bytes.div_ceil(1024),
+            timeout: opts.timeout,
+            read_timeout: opts.read_timeout.min(opts.timeout),
+        };
         let app = Router::new()
-            .route("/detect", post(detect_handler))
+            .route("/detect", post(detect_handler).layer(middleware::from_fn_with_state(state.clone(), admit)))
             .route("/health", get(health_handler))
             .layer(DefaultBodyLimit::max(opts.max_body_bytes))
             .layer(middleware::from_fn(log_request))
@@ -100,14 +150,67 @@ pub fn serve(opts: &ServeOptions) -> Result<()> {
         let listener = tokio::net::TcpListener::bind(opts.addr).await.with_context(|| format!("binding {}", opts.addr))?;
         let addr = listener.local_addr()?;
         println!("listening on http://{addr}");
-        eprintln!("POST http://{addr}/detect with a point cloud (PCD, KITTI .bin or .npy); GET http://{addr}/health; Ctrl-C stops");
-        axum::serve(listener, app)
-            .with_graceful_shutdown(async {
-                let _ = tokio::signal::ctrl_c().await;
-            })
-            .await
-            .context("serving")
+        eprintln!("POST http://{addr}/detect with a point cloud (PCD, KITTI .bin or .npy); GET http://{addr}/health; SIGTERM or Ctrl-C stops");
+        axum::serve(listener, app).with_graceful_shutdown(shutdown_signal()).await.context("serving")?;
+        eprintln!("stopped: every request in flight was answered");
+        Ok(())
     })
+}
+
+/// SIGTERM (what service managers and container runtimes send) or Ctrl-C.
+async fn shutdown_signal() {
+    let ctrl_c = async {
+        let _ = tokio::signal::ctrl_c().await;
+    };
+    #[cfg(unix)]
+    let term = async {
+        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+            Ok(mut s) => {
+                s.recv().await;
+            }
+            Err(_) => std::future::pending::<()>().await,
+        }
+    };
+    #[cfg(not(unix))]
+    let term = std::future::pending::<()>();
+    tokio::select! {
+        _ = ctrl_c => {},
+        _ = term => {},
+    }
+    eprintln!("stopping: no new connections; finishing the requests in flight");
+}
+
+/// Admits a `/detect` request: reserves its share of the memory budget before its body is read
+/// (by its Content-Length, else the largest body), holds it until the answer, answers 408 to a
+/// client whose body has not arrived by `--read-timeout-s`, and ends the request at `--timeout-s`
+/// whatever it is waiting for.
+async fn admit(State(state): State<AppState>, mut req: Request, next: Next) -> Response {
+    let arrived = tokio::time::Instant::now();
+    let (deadline, read_deadline) = (arrived + state.timeout, arrived + state.read_timeout);
+    let secs = state.timeout.as_secs_f64();
+    let announced = req.headers().get(header::CONTENT_LENGTH).and_then(|v| v.to_str().ok()).and_then(|v| v.trim().parse::<u64>().ok());
+    if let Some(n) = announced.filter(|&n| n > state.max_body_bytes as u64) {
+        return error(StatusCode::PAYLOAD_TOO_LARGE, format!("a body of {n} bytes is over the service's --max-body-mb ({} bytes)", state.max_body_bytes));
+    }
+    let body = announced.map_or(state.max_body_bytes, |n| n as usize);
+    let kib = (body.saturating_mul(RESERVE_PER_BODY_BYTE).div_ceil(1024)).clamp(1, state.budget_kib) as u32;
+    let Ok(Ok(_reserved)) = tokio::time::timeout_at(deadline, state.budget.clone().acquire_many_owned(kib)).await else {
+        return error(StatusCode::SERVICE_UNAVAILABLE, format!("busy: no room for this request within {secs} s; try again later"));
+    };
+    let body_read = BodyRead::default();
+    req.extensions_mut().insert(body_read.clone());
+    let mut answer = std::pin::pin!(next.run(req));
+    if let Ok(res) = tokio::time::timeout_at(read_deadline, &mut answer).await {
+        return res;
+    }
+    if !body_read.0.load(Ordering::Acquire) {
+        let read_secs = state.read_timeout.as_secs_f64();
+        return error(StatusCode::REQUEST_TIMEOUT, format!("the body was not received within {read_secs} s"));
+    }
+    match tokio::time::timeout_at(deadline, answer).await {
+        Ok(res) => res,
+        Err(_) => error(StatusCode::SERVICE_UNAVAILABLE, format!("no answer within {secs} s: the model is busy; try again later")),
+    }
 }
 
 /// Loads the detector on its own thread (Burn's CPU backends and the model stay there) and
@@ -137,6 +240,10 @@ fn start_model_thread(opts: &ServeOptions, mut rx: mpsc::Receiver<Job>) -> Resul
             let _ = ready_tx.send(Ok(health));
             while let Some(job) = rx.blocking_recv() {
                 let Job { points, pose, score_threshold, render, reply } = job;
+                if reply.is_closed() {
+                    // Its client has gone or its time ran out while it waited.
+                    continue;
+                }
                 // A panic inside the model answers 500 for this request; the service goes on.
                 let answer = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
                     let found = find_people(&detector, &points, &pose, score_threshold);
@@ -144,10 +251,10 @@ fn start_model_thread(opts: &ServeOptions, mut rx: mpsc::Receiver<Job>) -> Resul
                         let frame = FrameResult { sequence: String::new(), name: "request".into(), gt: vec![], num_points: vec![], detections: found.base };
                         render_bev_png(&found.base_points, &frame, range).map(Answer::Png).map_err(|e| format!("{e:#}"))
                     } else {
-                        Ok(Answer::Boxes(found.input.iter().map(|d| BoxRecord::new(&d.bbox, d.score)).collect()))
+                        Ok(Answer::Boxes(found.input.iter().map(|d| BoxRecord::new(&d.bbox, d.score)).collect(), found.dropped_out_of_volume))
                     }
                 }))
-                .unwrap_or_else(|_| Err("the model failed on this cloud".into()));
+                .unwrap_or_else(|payload| Err(format!("the model failed on this cloud: {}", panic_message(&*payload))));
                 let _ = reply.send(answer);
             }
         })
@@ -171,32 +278,64 @@ fn error(status: StatusCode, message: impl Into<String>) -> Response {
     json_response(status, &json!({ "error": message.into() }))
 }
 
-async fn detect_handler(State(state): State<AppState>, query: Result<Query<DetectQuery>, axum::extract::rejection::QueryRejection>, headers: HeaderMap, body: Bytes) -> Response {
-    let Query(q) = match query {
-        Ok(q) => q,
-        Err(e) => return error(StatusCode::BAD_REQUEST, format!("query: {}", e.body_text())),
-    };
-    let render = match q.render.as_deref() {
-        None | Some("0") | Some("false") => false,
-        Some("1") | Some("true") | Some("") => true,
-        Some(v) => return error(StatusCode::BAD_REQUEST, format!("render={v}: use 1 or 0")),
-    };
-    let score_threshold = q.score_threshold.unwrap_or(state.score_threshold);
-    if !(0.0..=1.0).contains(&score_threshold) {
-        return error(StatusCode::BAD_REQUEST, format!("score_threshold={score_threshold}: must lie in [0, 1]"));
+/// A `/detect` request's options, from its query string.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DetectParams {
+    /// `format=`: the body's format where the body carries no signature.
+    pub format: Option<String>,
+    /// `render=1`: answer a PNG.
+    pub render: bool,
+    /// `score_threshold=`, in [0, 1].
+    pub score_threshold: f64,
+}
+
+impl DetectParams {
+    /// Parses a query string (without the `?`); `Err` is the message a 400 carries.
+    pub fn from_query(query: Option<&str>, default_threshold: f64) -> Result<Self, String> {
+        let q: DetectQuery = match query {
+            None => DetectQuery { format: None, render: None, score_threshold: None },
+            Some(text) => {
+                let uri: axum::http::Uri = format!("/detect?{text}").parse().map_err(|_| format!("query `{text}` is not a valid URI query"))?;
+                Query::<DetectQuery>::try_from_uri(&uri).map_err(|e| format!("query: {}", e.body_text()))?.0
+            }
+        };
+        let render = match q.render.as_deref() {
+            None | Some("0") | Some("false") => false,
+            Some("1") | Some("true") | Some("") => true,
+            Some(v) => return Err(format!("render={v}: use 1 or 0")),
+        };
+        let score_threshold = q.score_threshold.unwrap_or(default_threshold);
+        if !(0.0..=1.0).contains(&score_threshold) {
+            return Err(format!("score_threshold={score_threshold}: must lie in [0, 1]"));
+        }
+        Ok(Self { format: q.format, render, score_threshold })
     }
+}
+
+async fn detect_handler(State(state): State<AppState>, uri: axum::http::Uri, headers: HeaderMap, body_read: Option<axum::Extension<BodyRead>>, body: Bytes) -> Response {
+    if let Some(axum::Extension(flag)) = body_read {
+        flag.0.store(true, Ordering::Release);
+    }
+    let DetectParams { format, render, score_threshold } = match DetectParams::from_query(uri.query(), state.score_threshold) {
+        Ok(p) => p,
+        Err(message) => return error(StatusCode::BAD_REQUEST, message),
+    };
     if body.is_empty() {
         return error(StatusCode::BAD_REQUEST, "empty body: POST a point cloud (PCD, KITTI .bin or .npy)");
     }
-    let format = match body_format(&body, q.format.as_deref(), &headers) {
+    let format = match body_format(&body, format.as_deref(), &headers) {
         Ok(f) => f,
         Err(r) => return r,
     };
     let started = Instant::now();
-    let cloud = match tokio::task::spawn_blocking(move || parse_cloud(&body, format)).await {
+    let limits = state.limits;
+    let cloud = match tokio::task::spawn_blocking(move || parse_cloud_within(&body, format, &limits)).await {
         Ok(Ok(c)) => c,
+        Ok(Err(kind @ ErrorKind::OverLimit(_))) => {
+            return error(StatusCode::PAYLOAD_TOO_LARGE, format!("{} cloud {kind} (the service's --max-points or --max-body-mb)", format_name(format)));
+        }
         Ok(Err(kind)) => return error(StatusCode::BAD_REQUEST, format!("not a valid {} cloud: {kind}", format_name(format))),
-        Err(_) => return error(StatusCode::INTERNAL_SERVER_ERROR, "reading the cloud failed"),
+        Err(e) => return error(StatusCode::INTERNAL_SERVER_ERROR, format!("reading the cloud failed: {}", if e.is_panic() { panic_message(&*e.into_panic()) } else { e.to_string() })),
     };
     let (n_points, dropped_non_finite) = (cloud.points.len(), cloud.dropped_non_finite);
     let (tx, rx) = oneshot::channel();
@@ -205,12 +344,13 @@ async fn detect_handler(State(state): State<AppState>, query: Result<Query<Detec
     }
     match rx.await {
         Ok(Ok(Answer::Png(png))) => ([(header::CONTENT_TYPE, "image/png")], png).into_response(),
-        Ok(Ok(Answer::Boxes(detections))) => {
+        Ok(Ok(Answer::Boxes(detections, dropped_out_of_volume))) => {
             let report = FrameReport {
                 source: "request body".into(),
                 format: format_name(format).into(),
                 points: n_points,
                 dropped_non_finite,
+                dropped_out_of_volume,
                 pose: state.pose.to_string(),
                 detections,
                 score_threshold,

@@ -359,3 +359,123 @@ fn the_service_answers_concurrent_valid_and_malformed_bodies() {
     assert_eq!(request(&server.addr, "POST", "/detect", &[], b"").status, 400);
     assert_eq!(request(&server.addr, "GET", "/health", &[], b"").status, 200, "still healthy");
 }
+
+/// The hostile inputs of issue 44, as files: a 271-byte PCD claiming 4·10⁹ points (binary and
+/// ascii), an `.npy` whose shape claims 10¹² × 3, points a million metres out, and finite rows at
+/// ±1e38 after NaN and infinite ones.
+fn hostile_files(dir: &Path, people: &[[f32; 3]]) {
+    std::fs::create_dir_all(dir).unwrap();
+    let claim = |data: &str| {
+        let mut b = format!("# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS x y z intensity\nSIZE 4 4 4 4\nTYPE F F F F\nCOUNT 1 1 1 1\nWIDTH 4000000000\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 4000000000\nDATA {data}\n").into_bytes();
+        b.resize(271, b'1');
+        b
+    };
+    std::fs::write(dir.join("claims_4e9_binary.pcd"), claim("binary")).unwrap();
+    std::fs::write(dir.join("claims_4e9_ascii.pcd"), claim("ascii")).unwrap();
+    let mut header = "{'descr': '<f4', 'fortran_order': False, 'shape': (1000000000000, 3), }".to_string();
+    while (10 + header.len() + 1) % 64 != 0 {
+        header.push(' ');
+    }
+    header.push('\n');
+    let mut big = b"\x93NUMPY\x01\x00".to_vec();
+    big.extend((header.len() as u16).to_le_bytes());
+    big.extend(header.as_bytes());
+    std::fs::write(dir.join("shape_1e12.npy"), big).unwrap();
+    let mut far = people.to_vec();
+    far.extend([[1e6, 1e6, 1e6], [-1e6, -1e6, -1e6]]);
+    std::fs::write(dir.join("far.bin"), kitti_bin(&far)).unwrap();
+    let mut huge = vec![[f32::NAN, 0.0, 0.0], [f32::INFINITY, 1.0, 1.0], [0.0, f32::NEG_INFINITY, 2.0]];
+    huge.extend([[1e38, 1e38, 1e38], [-1e38, -1e38, -1e38], [1e38, -1e38, 0.0]]);
+    std::fs::write(dir.join("huge_after_nan.bin"), kitti_bin(&huge)).unwrap();
+}
+
+#[test]
+fn hostile_files_are_named_far_points_cropped_and_the_rest_written() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("hostile");
+    let (_, frames) = tree(tmp.path());
+    hostile_files(&dir, &frames[0].points);
+    std::fs::write(dir.join("good.bin"), kitti_bin(&frames[0].points)).unwrap();
+    let out = tmp.path().join("out");
+    let w = weights();
+    let started = std::time::Instant::now();
+    let res = train_bin(&["detect", dir.to_str().unwrap(), "--run", w.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&res.stderr);
+    assert!(!res.status.success());
+    assert!(err.contains("3 of 6 inputs"), "{err}");
+    for (file, says) in [("claims_4e9_binary.pcd", "4000000000 points"), ("claims_4e9_ascii.pcd", "4000000000 points"), ("shape_1e12.npy", "1000000000000×3")] {
+        let line = err.lines().find(|l| l.contains(file)).unwrap_or_else(|| panic!("{file} not named in\n{err}"));
+        assert!(line.contains(says), "{line}");
+    }
+    // Far points are outside the working volume: dropped, counted, and the people still found.
+    let far = report(&out.join("json/far.json"));
+    let good = report(&out.join("json/good.json"));
+    assert_eq!((far.dropped_out_of_volume, far.points), (2, good.points + 2));
+    assert_same_boxes(&far.detections, &good.detections, "far points added");
+    let huge = report(&out.join("json/huge_after_nan.json"));
+    assert_eq!((huge.points, huge.dropped_non_finite, huge.dropped_out_of_volume, huge.detections.len()), (3, 3, 3, 0));
+    assert!(started.elapsed() < Duration::from_secs(60), "hostile inputs took {:?}", started.elapsed());
+}
+
+/// Sends a request head announcing `announced` body bytes but only `sent` of them, then waits
+/// for the reply (a slow or stalled sender).
+fn stalled_request(addr: &str, announced: usize, sent: usize) -> u16 {
+    let mut stream = TcpStream::connect(addr).unwrap();
+    stream.set_read_timeout(Some(Duration::from_secs(60))).unwrap();
+    let head = format!("POST /detect?format=bin HTTP/1.1\r\nHost: {addr}\r\nContent-Length: {announced}\r\n\r\n");
+    stream.write_all(head.as_bytes()).unwrap();
+    stream.write_all(&vec![0u8; sent]).unwrap();
+    let mut raw = Vec::new();
+    let mut buf = [0u8; 4096];
+    while !raw.windows(4).any(|w| w == b"\r\n\r\n") {
+        match stream.read(&mut buf) {
+            Ok(0) | Err(_) => break,
+            Ok(n) => raw.extend_from_slice(&buf[..n]),
+        }
+    }
+    String::from_utf8_lossy(&raw).split_whitespace().nth(1).and_then(|s| s.parse().ok()).unwrap_or(0)
+}
+
+#[test]
+fn the_service_answers_hostile_bodies_with_4xx_and_stops_cleanly_on_sigterm() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("hostile");
+    let (_, frames) = tree(tmp.path());
+    hostile_files(&dir, &frames[0].points);
+    let server = start_server(&["--max-points", "80000", "--read-timeout-s", "3"]);
+    let body = |name: &str| std::fs::read(dir.join(name)).unwrap();
+    for (name, query, status) in [
+        ("claims_4e9_binary.pcd", "", 413),
+        ("claims_4e9_ascii.pcd", "", 413),
+        ("shape_1e12.npy", "", 400),
+        ("far.bin", "?format=bin", 200),
+        ("huge_after_nan.bin", "?format=bin", 200),
+    ] {
+        let r = request(&server.addr, "POST", &format!("/detect{query}"), &[], &body(name));
+        assert_eq!(r.status, status, "{name}: {}", String::from_utf8_lossy(&r.body));
+        let v: serde_json::Value = serde_json::from_slice(&r.body).unwrap();
+        if status == 200 {
+            assert!(v["dropped_out_of_volume"].as_u64().unwrap() >= 2, "{name}: {v}");
+        } else {
+            assert!(v["error"].as_str().unwrap().contains("points") || v["error"].as_str().unwrap().contains("NPY"), "{name}: {v}");
+        }
+    }
+    // Over --max-points: refused from its size before it is decoded.
+    let many: Vec<[f32; 3]> = (0..80_001).map(|i| [3.0 + (i % 100) as f32 * 0.01, 0.0, 0.0]).collect();
+    assert_eq!(request(&server.addr, "POST", "/detect?format=bin", &[], &kitti_bin(&many)).status, 413);
+    // A sender that stalls mid-body gets 408 when its time is up; the service goes on.
+    assert_eq!(stalled_request(&server.addr, 16_000, 1_000), 408);
+    assert_eq!(request(&server.addr, "GET", "/health", &[], b"").status, 200, "still healthy");
+
+    // SIGTERM while a request is in flight: it is answered, then the process exits 0.
+    let addr = server.addr.clone();
+    let valid = kitti_bin(&frames[0].points);
+    let in_flight = std::thread::spawn(move || request(&addr, "POST", "/detect?format=bin", &[], &valid).status);
+    std::thread::sleep(Duration::from_millis(300));
+    let mut server = server;
+    let killed = Command::new("kill").args(["-TERM", &server.child.id().to_string()]).status().unwrap();
+    assert!(killed.success());
+    assert_eq!(in_flight.join().unwrap(), 200, "the request in flight at SIGTERM is answered");
+    let status = server.child.wait().unwrap();
+    assert!(status.success(), "exit status after SIGTERM: {status:?}");
+}
