@@ -6,9 +6,9 @@ use serde::{Deserialize, Serialize};
 
 /// Axis-aligned ranges (metres, both ends kept) in the frame the model runs in.
 ///
-/// The default, ±100 m across and ±10 m up, holds every return of the sensors the simulator
-/// models (100 m range) and every person a scan can show, and keeps a 0.05 m voxel grid within
-/// ±2,000 cells.
+/// The default, ±100 m across and −20 to 40 m up, holds every return the simulator makes (its
+/// sensors see 100 m; `bench-v1`'s points reach 75 m across and 18 m up) and every person a scan
+/// can show, and keeps a 0.05 m voxel grid within ±2,000 cells.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct Volume {
@@ -22,7 +22,7 @@ pub struct Volume {
 
 impl Default for Volume {
     fn default() -> Self {
-        Self { x: [-100.0, 100.0], y: [-100.0, 100.0], z: [-10.0, 10.0] }
+        Self { x: [-100.0, 100.0], y: [-100.0, 100.0], z: [-20.0, 40.0] }
     }
 }
 
@@ -69,9 +69,9 @@ mod tests {
     #[test]
     fn far_and_nan_points_are_dropped_and_counted() {
         let v = Volume::default();
-        let mut pts = vec![[1.0, 2.0, 0.0], [1e6, 0.0, 0.0], [0.0, -1e38, 0.0], [f32::NAN, 0.0, 0.0], [100.0, -100.0, 10.0], [0.0, 0.0, -10.5]];
+        let mut pts = vec![[1.0, 2.0, 0.0], [1e6, 0.0, 0.0], [0.0, -1e38, 0.0], [f32::NAN, 0.0, 0.0], [100.0, -100.0, 40.0], [0.0, 0.0, -20.5]];
         assert_eq!(v.crop(&mut pts), 4);
-        assert_eq!(pts, vec![[1.0, 2.0, 0.0], [100.0, -100.0, 10.0]]);
+        assert_eq!(pts, vec![[1.0, 2.0, 0.0], [100.0, -100.0, 40.0]]);
     }
 
     #[test]
