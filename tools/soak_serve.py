@@ -6,7 +6,7 @@ valid ones, and the service's resident memory at start, peak and end.
 
 It starts the service itself (so it can read its memory from /proc) unless --addr is given:
 
-    python3 tools/soak_serve.py --minutes 10 --min-requests 20000 --out docs/soak/<date>
+    python3 tools/soak_serve.py --minutes 10 --min-requests 20000 --out docs/results/soak/<date>
 
 Standard library only. Exit status 1 if a valid request got a 5xx, the service died, or its
 memory grew more than --max-growth between the end of warm-up and the end.
@@ -201,10 +201,21 @@ def main():
     ap.add_argument("--max-growth", type=float, default=0.10)
     ap.add_argument("--valid-share", type=float, default=0.12, help="share of requests that are valid clouds")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--out", help="folder for soak.json and soak.md")
+    ap.add_argument("--out", help="folder for soak.json and soak.csv")
+    ap.add_argument("--write-hostile", metavar="DIR", help="only write the hostile bodies as files into DIR (for `train detect`) and exit")
     args = ap.parse_args()
 
     max_body = int(args.max_body_mb * 1024 * 1024)
+    if args.write_hostile:
+        os.makedirs(args.write_hostile, exist_ok=True)
+        for name, query, body, _, *announce in hostile(max_body, args.max_points):
+            if announce or not body or name in ("unknown_query", "bad_threshold", "over_max_points"):
+                continue  # hostile as a request (its size, its query, the service's limit), not as a file
+            ext = "bin" if "format=bin" in query else "npy" if body.startswith(b"\x93NUMPY") else "pcd"
+            with open(os.path.join(args.write_hostile, f"{name}.{ext}"), "wb") as f:
+                f.write(body)
+        print("\n".join(sorted(os.listdir(args.write_hostile))))
+        return
     server = None
     if args.addr:
         addr, pid = args.addr, args.pid

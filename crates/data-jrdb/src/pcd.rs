@@ -420,7 +420,9 @@ pub(crate) fn parse_pcd_within(
                     data.len()
                 )));
             }
-            if data.len() > need {
+            // Zeros after the last point are padding some PCL-era writers leave (a page's rest);
+            // anything else there means the header describes another file.
+            if data.len() > need && data[need..].iter().any(|&b| b != 0) {
                 return Err(ErrorKind::Mismatch(format!(
                     "{} data bytes, the header declares {need} ({n} points x {rec} bytes)",
                     data.len()

@@ -253,3 +253,21 @@ fn mutated_calibration_and_labels_never_panic() {
     let e = read_cloud(&dir.path().join("absent.pcd")).unwrap_err();
     assert!(e.to_string().contains("absent.pcd"));
 }
+
+#[test]
+fn every_recorded_hostile_input_is_refused_or_read_within_bounds() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fuzz_regressions/clouds");
+    let mut n = 0;
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        let bytes = std::fs::read(&path).unwrap();
+        let factor = if bytes.windows(17).any(|w| w == b"binary_compressed") { 5 * 88 + 4 } else { 5 };
+        let (res, peak) = peak_of(|| read_cloud(&path));
+        assert!(peak <= factor * bytes.len() + (64 << 10) + bytes.len(), "{}: held {peak} bytes", path.display());
+        if let Err(e) = res {
+            assert!(e.to_string().contains(path.file_name().unwrap().to_str().unwrap()), "{e} should name the file");
+        }
+        n += 1;
+    }
+    assert!(n >= 10, "{n} recorded inputs");
+}

@@ -110,8 +110,12 @@ fn malformed_files_are_errors_naming_the_file() {
     binary.extend(binary_body());
     expect("trunc_bin.pcd", &binary[..binary.len() - 5], |k| matches!(k, ErrorKind::Truncated(_)));
     let mut extra = binary.clone();
-    extra.extend([0u8; 7]);
+    extra.extend([0u8, 0, 3, 0, 0, 0, 0]);
     expect("extra_bin.pcd", &extra, |k| matches!(k, ErrorKind::Mismatch(_)));
+    // Zero padding after the last point (as SUSTechPOINTS' example scans have) is read past.
+    let mut padded = binary.clone();
+    padded.extend([0u8; 3848]);
+    assert_eq!(read_pcd(&write("padded_bin.pcd", &padded), NonFinite::Drop).unwrap().xyz, POINTS);
     let raw = columns_raw();
     let c = compressed(&raw, &lzf::compress(&raw));
     expect("trunc_comp.pcd", &c[..c.len() - 3], |k| matches!(k, ErrorKind::Truncated(_)));

@@ -279,8 +279,11 @@ pub fn detect(detector: &RunDetector, inputs: &[Input], opts: &DetectOptions) ->
                 summary.detect_seconds += secs;
             }
             Err(e) => {
-                pb.suspend(|| eprintln!("skipped {}: {e:#}", input.describe()));
-                summary.failed.push((input.describe(), format!("{e:#}")));
+                let (what, why) = (input.describe(), format!("{e:#}"));
+                // Reader errors name the file themselves.
+                let line = if why.starts_with(&what) { why.clone() } else { format!("{what}: {why}") };
+                pb.suspend(|| eprintln!("skipped {line}"));
+                summary.failed.push((what, why));
             }
         }
         pb.inc(1);
