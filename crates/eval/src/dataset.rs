@@ -2,7 +2,9 @@
 //!
 //! The frames evaluated are the ground truth's (as in the official tool): every GT frame needs
 //! detections (an empty file or list is fine), extra detection frames are not evaluated.
-//! - KITTI layout: `GT/<sequence>/<frame>.txt` and `DET/<sequence>/<frame>.txt`.
+//! - KITTI layout: `GT/<sequence>/<frame>.txt` and `DET/<sequence>/<frame>.txt`; `.txt` files
+//!   directly in the folder are frames of one unnamed sequence (what `train detect` writes for
+//!   plain files: `OUT/kitti/<name>.txt`).
 //! - JRDB layout: `GT/<sequence>.json` (`labels_3d`) or one such file, and
 //!   `DET/<sequence>.json` (pmunet detection files, see [`crate::jrdb`]) or one such file.
 
@@ -43,7 +45,7 @@ fn stem(p: &Path) -> String {
 }
 
 /// Guesses the layout: a `.json` file or a folder of `.json` files is JRDB, a folder of
-/// sequence folders is KITTI.
+/// sequence folders or of `.txt` files is KITTI.
 pub fn detect_format(path: &Path) -> Result<Format> {
     if path.is_file() {
         return if has_ext(path, "json") {
@@ -60,10 +62,12 @@ pub fn detect_format(path: &Path) -> Result<Format> {
         Ok(Format::Kitti)
     } else if entries.iter().any(|p| has_ext(p, "json")) {
         Ok(Format::Jrdb)
+    } else if entries.iter().any(|p| has_ext(p, "txt")) {
+        Ok(Format::Kitti)
     } else {
         Err(EvalError::Layout {
             path: path.into(),
-            message: "neither sequence folders of .txt files (kitti) nor .json files (jrdb); pass --format".into(),
+            message: "neither .txt files or sequence folders of them (kitti) nor .json files (jrdb); pass --format".into(),
         })
     }
 }
@@ -87,14 +91,17 @@ fn load_gt(path: &Path, format: Format) -> Result<Side> {
     let mut side = Side::new();
     match format {
         Format::Kitti => {
-            for seq_dir in read_dir_sorted(path)?.into_iter().filter(|p| p.is_dir()) {
-                let seq = side
-                    .entry(seq_dir.file_name().unwrap().to_string_lossy().into_owned())
-                    .or_default();
-                for f in read_dir_sorted(&seq_dir)?
-                    .into_iter()
-                    .filter(|p| has_ext(p, "txt"))
-                {
+            // The folder's own `.txt` files are the unnamed sequence "": `DET/<frame>.txt` pairs with them.
+            let entries = read_dir_sorted(path)?;
+            let sequences = std::iter::once((String::new(), path.to_path_buf()))
+                .chain(entries.iter().filter(|p| p.is_dir()).map(|d| (d.file_name().unwrap().to_string_lossy().into_owned(), d.clone())));
+            for (name, dir) in sequences {
+                let files: Vec<PathBuf> = read_dir_sorted(&dir)?.into_iter().filter(|p| p.is_file() && has_ext(p, "txt")).collect();
+                if files.is_empty() {
+                    continue;
+                }
+                let seq = side.entry(name).or_default();
+                for f in files {
                     let objs = kitti::read_file(&f, FileKind::GroundTruth)?;
                     seq.insert(stem(&f), (f, objs));
                 }

@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use eval::dataset::{Format, detect_format, load, write_kitti_tree};
 use eval::jrdb::{Detection, DetectionFile, labels_to_kitti, read_labels_3d, write_detections};
-use eval::kitti::{FileKind, read_file};
+use eval::kitti::{FileKind, KittiObject, read_file};
 use eval::{Box3d, EvalError};
 
 struct TempDir(PathBuf);
@@ -397,4 +397,46 @@ fn cli_writes_json_csv_and_png() {
             && table.contains("s1"),
         "{table}"
     );
+}
+
+#[test]
+fn a_folder_of_txt_files_is_one_unnamed_sequence_as_detect_writes_it() {
+    // `train detect scans/ --out OUT` writes OUT/kitti/<name>.txt for plain files.
+    let tmp = TempDir::new("flat");
+    let person = Box3d { cx: 4.0, cy: -1.0, cz: -0.1, l: 0.6, w: 0.5, h: 1.7, rot_z: 0.3 };
+    let gt = KittiObject::ground_truth(&person, 120, -1.0).to_line(FileKind::GroundTruth) + "\n";
+    let det = KittiObject::from_box3d(&person, -1, 0.9).to_line(FileKind::Detections) + "\n";
+    let (gt, det) = (gt.as_str(), det.as_str());
+    write(&tmp.0.join("gt/scan_a.txt"), gt);
+    write(&tmp.0.join("gt/scan_b.txt"), gt);
+    write(&tmp.0.join("det/kitti/scan_a.txt"), det);
+    write(&tmp.0.join("det/kitti/scan_b.txt"), det);
+    let (g, d) = (tmp.0.join("gt"), tmp.0.join("det/kitti"));
+    assert_eq!((detect_format(&g).unwrap(), detect_format(&d).unwrap()), (Format::Kitti, Format::Kitti));
+    let frames = load(&g, Format::Kitti, &d, Format::Kitti, false).unwrap();
+    let names: Vec<(&str, &str, usize, usize)> = frames.iter().map(|f| (f.sequence.as_str(), f.name.as_str(), f.gt.len(), f.det.len())).collect();
+    assert_eq!(names, vec![("", "scan_a", 1, 1), ("", "scan_b", 1, 1)]);
+    // A missing one is named where it was expected.
+    std::fs::remove_file(tmp.0.join("det/kitti/scan_b.txt")).unwrap();
+    let e = load(&g, Format::Kitti, &d, Format::Kitti, false).unwrap_err().to_string();
+    assert!(e.contains("det/kitti/scan_b.txt"), "{e}");
+    // The documented command: the CLI scores them (two people found exactly: with one, the
+    // official slot-0 rule gives AP 0).
+    write(&tmp.0.join("det/kitti/scan_b.txt"), &(KittiObject::from_box3d(&person, -1, 0.8).to_line(FileKind::Detections) + "\n"));
+    let score = |g: &Path, d: &Path| -> serde_json::Value {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_eval")).args(["--gt", g.to_str().unwrap(), "--det", d.to_str().unwrap(), "--json"]).output().unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        serde_json::from_slice(&out.stdout).unwrap()
+    };
+    let flat = score(&g, &d);
+    assert_eq!((flat["num_gt"].as_u64(), flat["num_det"].as_u64(), flat["num_frames"].as_u64()), (Some(2), Some(2), Some(2)), "{flat}");
+    // The same files as one named sequence score the same.
+    for (from, to) in [(&g, tmp.0.join("gt_seq/s")), (&d, tmp.0.join("det_seq/s"))] {
+        std::fs::create_dir_all(&to).unwrap();
+        for f in ["scan_a.txt", "scan_b.txt"] {
+            std::fs::copy(from.join(f), to.join(f)).unwrap();
+        }
+    }
+    let nested = score(&tmp.0.join("gt_seq"), &tmp.0.join("det_seq"));
+    assert_eq!((flat["ap3d"].clone(), flat["apbev"].clone()), (nested["ap3d"].clone(), nested["apbev"].clone()));
 }

@@ -50,6 +50,13 @@ pub enum Slot {
     Best,
 }
 
+/// `latest` or `best`, as `--checkpoint` spells it.
+impl std::fmt::Display for Slot {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.file())
+    }
+}
+
 impl Slot {
     fn file(self) -> &'static str {
         match self {

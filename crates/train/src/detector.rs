@@ -62,7 +62,7 @@ impl RunDetector {
         config.kernels.apply();
         let files = Checkpoints::new(RunDir::at(run).checkpoints())
             .get(slot)?
-            .with_context(|| format!("{} has no {slot:?} checkpoint", run.display()))?;
+            .with_context(|| format!("{} has no `{slot}` checkpoint (--checkpoint latest or best)", run.display()))?;
         let device = config.backend.device()?;
         let model = match &config.model {
             ModelConfig::PersonMinkunet(c) => Model::PersonMinkunet(files.load_model(c.init(&device))?.valid()),

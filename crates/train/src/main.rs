@@ -9,7 +9,7 @@
 //! cargo run -p train -- serve --addr 127.0.0.1:8080                   # the same over HTTP
 //! ```
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
@@ -293,8 +293,17 @@ impl ModelArgs {
         self.checkpoint.map_or(Slot::Latest, Slot::from)
     }
 
-    /// Pins the backend and checks the threshold before anything loads.
-    fn prepare(&self) -> Result<()> {
+    /// Finds the shipped weights from any working directory (see [`shipped_weights`]), pins the
+    /// backend and checks the threshold, before anything loads.
+    fn prepare(mut self) -> Result<Self> {
+        if self.run == Path::new(SHIPPED_WEIGHTS) && !self.run.join("config.toml").is_file() {
+            self.run = shipped_weights()?;
+        }
+        self.check()?;
+        Ok(self)
+    }
+
+    fn check(&self) -> Result<()> {
         anyhow::ensure!((0.0..=1.0).contains(&self.score_threshold), "--score-threshold {} must lie in [0, 1]", self.score_threshold);
         let b = match self.backend {
             Some(b) => b,
@@ -302,6 +311,22 @@ impl ModelArgs {
         };
         pin(b);
         Ok(())
+    }
+}
+
+/// The shipped weights when the working directory is not the repository's root: beside the
+/// sources this binary was built from, or above the executable (`<repo>/target/debug/train`).
+fn shipped_weights() -> Result<PathBuf> {
+    let built_from = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..").join(SHIPPED_WEIGHTS);
+    let exe = std::env::current_exe().ok();
+    let above_exe = exe.iter().flat_map(|e| e.ancestors().skip(1)).map(|d| d.join(SHIPPED_WEIGHTS));
+    let tried: Vec<PathBuf> = std::iter::once(PathBuf::from(SHIPPED_WEIGHTS)).chain(std::iter::once(built_from)).chain(above_exe).collect();
+    match tried.iter().find(|d| d.join("config.toml").is_file()) {
+        Some(d) => Ok(d.canonicalize().unwrap_or_else(|_| d.clone())),
+        None => anyhow::bail!(
+            "the shipped weights ({SHIPPED_WEIGHTS}) are not in the working directory, beside the sources this binary was built from, or above it; pass --run DIR (looked in {})",
+            tried.iter().map(|d| d.display().to_string()).collect::<Vec<_>>().join(", ")
+        ),
     }
 }
 
@@ -403,7 +428,7 @@ fn main() -> ExitCode {
             Ok(())
         })(),
         Some(Cmd::Detect { paths, model, out, render }) => (|| -> Result<()> {
-            model.prepare()?;
+            let model = model.prepare()?;
             let inputs = train::detect::collect_inputs(&paths)?;
             let detector = RunDetector::load(&model.run, model.slot(), model.backend)?;
             let opts = DetectOptions { pose: model.transform, score_threshold: model.score_threshold, out: out.clone(), render, verbose: true };
@@ -424,7 +449,7 @@ fn main() -> ExitCode {
             Ok(())
         })(),
         Some(Cmd::Serve { model, addr, max_body_mb, queue, max_points, memory_budget_mb, timeout_s, read_timeout_s }) => (|| -> Result<()> {
-            model.prepare()?;
+            let model = model.prepare()?;
             anyhow::ensure!(max_body_mb > 0.0 && max_body_mb.is_finite(), "--max-body-mb must be positive");
             anyhow::ensure!(max_points > 0, "--max-points must be at least 1");
             let per_body = train::serve::RESERVE_PER_BODY_BYTE as f64;

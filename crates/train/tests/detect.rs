@@ -480,3 +480,23 @@ fn the_service_answers_hostile_bodies_with_4xx_and_stops_cleanly_on_sigterm() {
     let status = server.child.wait().unwrap();
     assert!(status.success(), "exit status after SIGTERM: {status:?}");
 }
+
+#[test]
+fn the_shipped_weights_are_found_from_any_working_directory() {
+    let tmp = tempfile::tempdir().unwrap();
+    let frame = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/other_tools/frame.npy");
+    let out = tmp.path().join("out");
+    let res = Command::new(env!("CARGO_BIN_EXE_train"))
+        .args(["detect", frame.to_str().unwrap(), "--out", out.to_str().unwrap()])
+        .current_dir("/")
+        .output()
+        .unwrap();
+    assert!(res.status.success(), "{}", String::from_utf8_lossy(&res.stderr));
+    assert!(!report(&out.join("json/frame.json")).detections.is_empty());
+    // A checkpoint the folder lacks (the shipped weights keep only the latest) is named as the
+    // option spells it.
+    let w = weights();
+    let res = train_bin(&["detect", frame.to_str().unwrap(), "--run", w.to_str().unwrap(), "--checkpoint", "best", "--out", out.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&res.stderr);
+    assert!(!res.status.success() && err.contains("has no `best` checkpoint"), "{err}");
+}
