@@ -136,7 +136,7 @@ pub struct Counts {
 
 /// Protocol state of a ground-truth line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum GtState {
+pub(crate) enum GtState {
     Dropped,
     Valid,
     Ignored,
@@ -144,7 +144,7 @@ enum GtState {
 
 /// Protocol state of a detection line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum DetState {
+pub(crate) enum DetState {
     Other,
     Valid,
     Ignored,
@@ -158,7 +158,7 @@ fn beyond(o: &KittiObject, p: &Protocol) -> bool {
 
 /// Step 1 for a GT line. Class: `Pedestrian` valid, anything else (incl. `Person_sitting`,
 /// `DontCare`) ignored; `num_points < 0` drops the line whatever else holds.
-fn classify_gt(g: &KittiObject, p: &Protocol) -> GtState {
+pub(crate) fn classify_gt(g: &KittiObject, p: &Protocol) -> GtState {
     if g.num_points < 0 {
         GtState::Dropped
     } else if g.is_pedestrian() && g.num_points >= p.min_points && !beyond(g, p) {
@@ -170,7 +170,7 @@ fn classify_gt(g: &KittiObject, p: &Protocol) -> GtState {
 
 /// Step 1 for a detection: the range test comes first, so an out-of-range line of any class
 /// is "ignored" (it can absorb a match), an in-range non-pedestrian is never considered.
-fn classify_det(d: &KittiObject, p: &Protocol) -> DetState {
+pub(crate) fn classify_det(d: &KittiObject, p: &Protocol) -> DetState {
     if beyond(d, p) {
         DetState::Ignored
     } else if d.is_pedestrian() {

@@ -10,6 +10,7 @@
 //! - [`jrdb`]: JRDB `labels_3d` JSON (ground truth) and pmunet's detection JSON (schema documented there).
 //! - [`dataset`]: pairing GT and detection files into [`Frame`]s, writing the official txt tree.
 //! - [`ap`]: the official protocol (filters, two matching passes, 41 thresholds, AP) and named variants.
+//! - [`centre`]: bird's-eye-centre AP (not a JRDB metric), for real scans labelled by other conventions.
 //! - [`report`]: AP3D/APBEV at 0.3/0.5/0.7, per-sequence AP, table, JSON, PR CSV.
 //! - [`plot`]: PR curves as PNG.
 //!
@@ -34,6 +35,8 @@
 
 /// Official protocol: filters, matching, thresholds, AP.
 pub mod ap;
+/// Bird's-eye-centre AP (not a JRDB metric), for scans labelled by other conventions.
+pub mod centre;
 /// Reading GT and detections into frames; writing the official tree.
 pub mod dataset;
 /// The crate's error type.
