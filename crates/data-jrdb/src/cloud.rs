@@ -188,23 +188,25 @@ fn npy(bytes: &[u8], limits: &ReadLimits) -> std::result::Result<Vec<[f32; 3]>, 
     Ok((0..n).map(|r| [at(r * c), at(r * c + 1), at(r * c + 2)]).collect())
 }
 
+/// An NPY file as NumPy's `np.save` writes format 1.0 (C order, the header padded to 64 bytes):
+/// `descr` is the dtype (`<f4`), `shape` the Python tuple (`(N, 3)`), `data` the raw array. For
+/// fixtures and tests, odd shapes included.
+pub fn encode_npy(descr: &str, shape: &str, data: &[u8]) -> Vec<u8> {
+    let mut header = format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': {shape}, }}");
+    while (10 + header.len() + 1) % 64 != 0 {
+        header.push(' ');
+    }
+    header.push('\n');
+    let mut out = b"\x93NUMPY\x01\x00".to_vec();
+    out.extend((header.len() as u16).to_le_bytes());
+    out.extend(header.as_bytes());
+    out.extend(data);
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// An NPY v1 file as NumPy writes it (`np.save`), little-endian, C order.
-    fn npy_bytes(descr: &str, shape: &str, data: &[u8]) -> Vec<u8> {
-        let mut header = format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': {shape}, }}");
-        while (10 + header.len() + 1) % 64 != 0 {
-            header.push(' ');
-        }
-        header.push('\n');
-        let mut out = b"\x93NUMPY\x01\x00".to_vec();
-        out.extend((header.len() as u16).to_le_bytes());
-        out.extend(header.as_bytes());
-        out.extend(data);
-        out
-    }
 
     #[test]
     fn every_format_reads_the_same_points() {
@@ -215,8 +217,8 @@ mod tests {
         let want = vec![pts[0], pts[1]];
         for (bytes, format) in [
             (bin, CloudFormat::KittiBin),
-            (npy_bytes("<f4", "(3, 3)", &f4), CloudFormat::Npy),
-            (npy_bytes("<f8", "(3, 4)", &f8x4), CloudFormat::Npy),
+            (encode_npy("<f4", "(3, 3)", &f4), CloudFormat::Npy),
+            (encode_npy("<f8", "(3, 4)", &f8x4), CloudFormat::Npy),
         ] {
             let c = parse_cloud(&bytes, format).unwrap();
             assert_eq!((c.points, c.dropped_non_finite), (want.clone(), 1), "{format:?}");
@@ -225,7 +227,7 @@ mod tests {
 
     #[test]
     fn formats_are_recognised_from_bytes_then_names() {
-        assert_eq!(CloudFormat::sniff(&npy_bytes("<f4", "(0, 3)", &[])), Some(CloudFormat::Npy));
+        assert_eq!(CloudFormat::sniff(&encode_npy("<f4", "(0, 3)", &[])), Some(CloudFormat::Npy));
         assert_eq!(CloudFormat::sniff(b"# .PCD v0.7 - Point Cloud Data\nVERSION 0.7\n"), Some(CloudFormat::Pcd));
         assert_eq!(CloudFormat::sniff(b"VERSION 0.7\nFIELDS x y z\n"), Some(CloudFormat::Pcd));
         assert_eq!(CloudFormat::sniff(&[0u8; 32]), None);
@@ -237,13 +239,13 @@ mod tests {
     fn malformed_clouds_say_what_is_wrong() {
         let e = parse_cloud(&[0u8; 20], CloudFormat::KittiBin).unwrap_err().to_string();
         assert!(e.contains("16 bytes") && e.contains("4 bytes over"), "{e}");
-        let e = parse_cloud(&npy_bytes("<f4", "(2, 5)", &[0u8; 40]), CloudFormat::Npy).unwrap_err().to_string();
+        let e = parse_cloud(&encode_npy("<f4", "(2, 5)", &[0u8; 40]), CloudFormat::Npy).unwrap_err().to_string();
         assert!(e.contains("got 5"), "{e}");
-        let e = parse_cloud(&npy_bytes("<i4", "(1, 3)", &[0u8; 12]), CloudFormat::Npy).unwrap_err().to_string();
+        let e = parse_cloud(&encode_npy("<i4", "(1, 3)", &[0u8; 12]), CloudFormat::Npy).unwrap_err().to_string();
         assert!(e.contains("float32"), "{e}");
-        let e = parse_cloud(&npy_bytes("<f4", "(3,)", &[0u8; 12]), CloudFormat::Npy).unwrap_err().to_string();
+        let e = parse_cloud(&encode_npy("<f4", "(3,)", &[0u8; 12]), CloudFormat::Npy).unwrap_err().to_string();
         assert!(e.contains("2-D"), "{e}");
-        let e = parse_cloud(&npy_bytes("<f4", "(4, 3)", &[0u8; 12]), CloudFormat::Npy).unwrap_err().to_string();
+        let e = parse_cloud(&encode_npy("<f4", "(4, 3)", &[0u8; 12]), CloudFormat::Npy).unwrap_err().to_string();
         assert!(e.contains("NPY"), "{e}");
         let e = parse_cloud(b"\x93NUMPY\x01", CloudFormat::Npy).unwrap_err().to_string();
         assert!(e.contains("NPY header"), "{e}");

@@ -9,7 +9,7 @@ use std::cell::Cell;
 use std::path::Path;
 
 use data_jrdb::pcd::{Column, Encoding, FieldType, encode_pcd, parse_pcd};
-use data_jrdb::{Calibration, CloudFormat, ErrorKind, NonFinite, ReadLimits, parse_cloud, parse_cloud_within, read_cloud};
+use data_jrdb::{Calibration, CloudFormat, ErrorKind, NonFinite, ReadLimits, encode_npy, parse_cloud, parse_cloud_within, read_cloud};
 use rand::{Rng, SeedableRng};
 
 /// Counts the bytes live on each thread and the peak since the last reset.
@@ -58,16 +58,7 @@ fn pcd_header(fields: &str, sizes: &str, types: &str, counts: &str, width: &str,
 }
 
 fn npy_file(shape: &str, data: &[u8]) -> Vec<u8> {
-    let mut header = format!("{{'descr': '<f4', 'fortran_order': False, 'shape': {shape}, }}");
-    while (10 + header.len() + 1) % 64 != 0 {
-        header.push(' ');
-    }
-    header.push('\n');
-    let mut out = b"\x93NUMPY\x01\x00".to_vec();
-    out.extend((header.len() as u16).to_le_bytes());
-    out.extend(header.as_bytes());
-    out.extend(data);
-    out
+    encode_npy("<f4", shape, data)
 }
 
 /// Parses `bytes` as `format`, expecting an error that `check` accepts, within a few kilobytes.

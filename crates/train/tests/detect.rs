@@ -14,7 +14,7 @@ use std::time::Duration;
 
 use data_jrdb::pcd::{Column, Encoding, FieldType, encode_pcd};
 use data_jrdb::sim::{SynthConfig, synth};
-use data_jrdb::{DatasetConfig, JrdbDataset, Split};
+use data_jrdb::{DatasetConfig, JrdbDataset, Split, encode_npy};
 use eval::jrdb::read_detections;
 use train::{BoxRecord, FrameReport};
 
@@ -72,26 +72,17 @@ fn kitti_bin(points: &[[f32; 3]]) -> Vec<u8> {
 
 /// An `.npy` (format 1.0) of `points` as N×cols, float32 or float64.
 fn npy(points: &[[f32; 3]], cols: usize, f64s: bool) -> Vec<u8> {
-    let descr = if f64s { "<f8" } else { "<f4" };
-    let mut header = format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': ({}, {cols}), }}", points.len());
-    while (10 + header.len() + 1) % 64 != 0 {
-        header.push(' ');
-    }
-    header.push('\n');
-    let mut out = b"\x93NUMPY\x01\x00".to_vec();
-    out.extend((header.len() as u16).to_le_bytes());
-    out.extend(header.as_bytes());
+    let mut data = Vec::new();
     for p in points {
-        let row = [p[0], p[1], p[2], 1.0];
-        for &v in &row[..cols] {
+        for &v in &[p[0], p[1], p[2], 1.0][..cols] {
             if f64s {
-                out.extend((v as f64).to_le_bytes());
+                data.extend((v as f64).to_le_bytes());
             } else {
-                out.extend(v.to_le_bytes());
+                data.extend(v.to_le_bytes());
             }
         }
     }
-    out
+    encode_npy(if f64s { "<f8" } else { "<f4" }, &format!("({}, {cols})", points.len()), &data)
 }
 
 fn assert_same_boxes(got: &[BoxRecord], want: &[BoxRecord], what: &str) {
@@ -372,15 +363,7 @@ fn hostile_files(dir: &Path, people: &[[f32; 3]]) {
     };
     std::fs::write(dir.join("claims_4e9_binary.pcd"), claim("binary")).unwrap();
     std::fs::write(dir.join("claims_4e9_ascii.pcd"), claim("ascii")).unwrap();
-    let mut header = "{'descr': '<f4', 'fortran_order': False, 'shape': (1000000000000, 3), }".to_string();
-    while (10 + header.len() + 1) % 64 != 0 {
-        header.push(' ');
-    }
-    header.push('\n');
-    let mut big = b"\x93NUMPY\x01\x00".to_vec();
-    big.extend((header.len() as u16).to_le_bytes());
-    big.extend(header.as_bytes());
-    std::fs::write(dir.join("shape_1e12.npy"), big).unwrap();
+    std::fs::write(dir.join("shape_1e12.npy"), encode_npy("<f4", "(1000000000000, 3)", &[])).unwrap();
     let mut far = people.to_vec();
     far.extend([[1e6, 1e6, 1e6], [-1e6, -1e6, -1e6]]);
     std::fs::write(dir.join("far.bin"), kitti_bin(&far)).unwrap();
