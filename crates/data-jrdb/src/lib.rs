@@ -28,6 +28,8 @@ pub mod convention;
 pub mod dataset;
 /// Errors that name the file at fault.
 pub mod error;
+/// The ground under a sensor, fitted in its scan.
+pub mod ground;
 /// `labels_3d` JSON.
 pub mod labels;
 /// Seeded, shuffling, prefetching batch loader.

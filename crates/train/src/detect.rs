@@ -26,7 +26,7 @@ use serde::{Deserialize, Serialize};
 use crate::detector::RunDetector;
 use crate::progress;
 use crate::render::render_bev;
-use crate::sensor_pose::SensorPose;
+use crate::sensor_pose::{FrameSpec, Placement, SensorPose};
 use crate::validate::FrameResult;
 
 /// One box as `detect` writes it and `serve` answers it: the centre, the size (l along the
@@ -75,6 +75,10 @@ pub struct FrameReport {
     pub dropped_out_of_volume: usize,
     /// The input frame's pose in JRDB's base frame (`x=…,y=…,z=…,yaw=…` degrees).
     pub pose: String,
+    /// How the pose was chosen: `given`, `ground: …` (found in the scan, `--transform auto`) or
+    /// `no ground: …` (the given pose kept), or the tree's calibration.
+    #[serde(default)]
+    pub frame: String,
     /// Boxes scoring at least `score_threshold`, best first, in the input's frame.
     pub detections: Vec<BoxRecord>,
     /// The score threshold applied.
@@ -234,8 +238,9 @@ fn walk(dir: &Path, files: &mut Vec<PathBuf>) -> Result<()> {
 /// What `detect` does besides finding people.
 #[derive(Debug, Clone)]
 pub struct DetectOptions {
-    /// The input files' pose in the base frame (trees are merged by their own calibration).
-    pub pose: SensorPose,
+    /// The input files' pose in the base frame, or the ground to find in each (trees are merged
+    /// by their own calibration).
+    pub frame: FrameSpec,
     /// Boxes scoring below this are not written.
     pub score_threshold: f64,
     /// The output folder.
@@ -294,16 +299,18 @@ pub fn detect(detector: &RunDetector, inputs: &[Input], opts: &DetectOptions) ->
 }
 
 fn detect_one(detector: &RunDetector, input: &Input, opts: &DetectOptions) -> Result<(usize, f64)> {
-    let (points, dropped, format, pose) = match &input.source {
+    let (points, dropped, format, placement) = match &input.source {
         Source::File(p) => {
             let c = read_cloud(p)?;
-            (c.points, c.dropped_non_finite, format_name(c.format), opts.pose)
+            let placement = opts.frame.place(&c.points);
+            (c.points, c.dropped_non_finite, format_name(c.format), placement)
         }
         Source::Tree(ds, i) => {
             let f = ds.load(*i)?;
-            (f.points, f.dropped_non_finite, "jrdb", SensorPose::default())
+            (f.points, f.dropped_non_finite, "jrdb", Placement { pose: SensorPose::default(), how: "the tree's calibration".into() })
         }
     };
+    let pose = placement.pose;
     let t = Instant::now();
     let found = find_people(detector, &points, &pose, opts.score_threshold);
     let secs = t.elapsed().as_secs_f64();
@@ -314,6 +321,7 @@ fn detect_one(detector: &RunDetector, input: &Input, opts: &DetectOptions) -> Re
         dropped_non_finite: dropped,
         dropped_out_of_volume: found.dropped_out_of_volume,
         pose: pose.to_string(),
+        frame: placement.how,
         detections: found.input.iter().map(|d| BoxRecord::new(&d.bbox, d.score)).collect(),
         score_threshold: opts.score_threshold,
     };

@@ -69,7 +69,7 @@ pub use facing::{FacingOptions, FacingReport, FitBoxes, fit_facing};
 pub use infer::{InferOptions, InferOutput, infer};
 pub use run_dir::{Existing, RunDir};
 pub use schedule::Schedule;
-pub use sensor_pose::SensorPose;
+pub use sensor_pose::{FrameSpec, Placement, SensorPose};
 pub use serve::ServeOptions;
 pub use sweep::{SweepConfig, SweepResults, run_sweep};
 pub use trainer::{TrainOptions, TrainSummary, train, train_model};

@@ -16,7 +16,7 @@ use anyhow::{Context, Result, bail};
 use clap::{Args, Parser, Subcommand};
 use data_jrdb::Split;
 use model::FacingFeatures;
-use train::{BackendKind, CalibrateOptions, DetectOptions, Existing, FacingOptions, FitBoxes, InferOptions, RunConfig, RunDetector, RunDir, SensorPose, ServeOptions, Slot, SweepConfig, TrainOptions};
+use train::{BackendKind, CalibrateOptions, DetectOptions, Existing, FacingOptions, FitBoxes, InferOptions, RunConfig, RunDetector, RunDir, FrameSpec, ServeOptions, Slot, SweepConfig, TrainOptions};
 
 /// The weights `detect` and `serve` use unless told otherwise (relative to the working directory,
 /// which is the repository's root under `cargo run`).
@@ -282,10 +282,13 @@ struct ModelArgs {
     score_threshold: f64,
     /// Your sensor frame's pose in JRDB's base frame (x forward, y left, z up, metres, the floor
     /// at z = -0.7): `z=0.5,yaw=90` maps a point p to R(yaw)·p + (x, y, z); keys x, y, z in
-    /// metres, yaw in degrees. A sensor frame with x forward, z up and its origin H m above
-    /// the floor needs `z=H-0.7`. Not applied to JRDB-format trees (their calibration is).
-    #[arg(long, value_name = "x=…,y=…,z=…,yaw=…", default_value = "")]
-    transform: SensorPose,
+    /// metres, yaw (and roll, pitch) in degrees. A sensor frame with x forward, z up and its
+    /// origin H m above the floor needs `z=H-0.7`. `auto` finds the height and tilt from the
+    /// ground in each scan (`auto,yaw=-90` for a sensor whose y points forward); a scan without
+    /// ground in view keeps the pose given, and its report says so. Not applied to JRDB-format
+    /// trees (their calibration is).
+    #[arg(long, value_name = "auto|x=…,y=…,z=…,yaw=…", default_value = "")]
+    transform: FrameSpec,
 }
 
 impl ModelArgs {
@@ -431,7 +434,7 @@ fn main() -> ExitCode {
             let model = model.prepare()?;
             let inputs = train::detect::collect_inputs(&paths)?;
             let detector = RunDetector::load(&model.run, model.slot(), model.backend)?;
-            let opts = DetectOptions { pose: model.transform, score_threshold: model.score_threshold, out: out.clone(), render, verbose: true };
+            let opts = DetectOptions { frame: model.transform, score_threshold: model.score_threshold, out: out.clone(), render, verbose: true };
             let s = train::detect::detect(&detector, &inputs, &opts)?;
             println!(
                 "{} frames, {} people scoring ≥ {} in {:.1} s: {:.2} frames/s ({:.2} frames/s in the detector alone); outputs in {}",
@@ -468,7 +471,7 @@ fn main() -> ExitCode {
                 addr,
                 max_body_bytes: (max_body_mb * 1024.0 * 1024.0) as usize,
                 score_threshold: model.score_threshold,
-                pose: model.transform,
+                frame: model.transform,
                 queue,
                 max_points,
                 memory_budget_bytes: (memory_budget_mb * 1024.0 * 1024.0) as usize,

@@ -10,17 +10,24 @@ use std::fmt;
 use std::str::FromStr;
 
 use data_jrdb::Box3d;
+use data_jrdb::ground::{GroundSearch, fit_ground};
 
 /// The floor's height in JRDB's base frame (metres), which the models learned people stand on.
 pub const BASE_FLOOR_Z: f64 = -0.7;
 
-/// A rigid motion about z: the input frame's pose in the base frame.
+/// A rigid motion: the input frame's pose in the base frame. A point is levelled first (turned
+/// by `roll` about x, then `pitch` about y), then turned by `yaw` about z and moved by
+/// `translation`.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct SensorPose {
     /// Translation (metres) added after the rotation.
     pub translation: [f64; 3],
     /// Rotation about z (radians, counter-clockwise).
     pub yaw: f64,
+    /// Rotation about x applied first (radians).
+    pub roll: f64,
+    /// Rotation about y applied second (radians).
+    pub pitch: f64,
 }
 
 impl SensorPose {
@@ -31,18 +38,43 @@ impl SensorPose {
 
     /// A point of the input in the base frame.
     pub fn to_base(&self, p: [f32; 3]) -> [f32; 3] {
+        let [x, y, z] = self.level(p.map(f64::from));
         let (s, c) = self.yaw.sin_cos();
-        let [x, y, z] = p.map(f64::from);
         let t = self.translation;
         [(c * x - s * y + t[0]) as f32, (s * x + c * y + t[1]) as f32, (z + t[2]) as f32]
     }
 
-    /// A box found in the base frame, in the input's frame.
+    /// `R_y(pitch) · R_x(roll) · p`.
+    fn level(&self, [x, y, z]: [f64; 3]) -> [f64; 3] {
+        if self.roll == 0.0 && self.pitch == 0.0 {
+            return [x, y, z];
+        }
+        let (sr, cr) = self.roll.sin_cos();
+        let (y, z) = (cr * y - sr * z, sr * y + cr * z);
+        let (sp, cp) = self.pitch.sin_cos();
+        [cp * x + sp * z, y, -sp * x + cp * z]
+    }
+
+    /// The inverse of [`level`](Self::level).
+    fn unlevel(&self, [x, y, z]: [f64; 3]) -> [f64; 3] {
+        if self.roll == 0.0 && self.pitch == 0.0 {
+            return [x, y, z];
+        }
+        let (sp, cp) = self.pitch.sin_cos();
+        let (x, z) = (cp * x - sp * z, sp * x + cp * z);
+        let (sr, cr) = self.roll.sin_cos();
+        [x, cr * y + sr * z, -sr * y + cr * z]
+    }
+
+    /// A box found in the base frame, in the input's frame: its centre moved exactly, its heading
+    /// turned back by the yaw (a levelled upright box stays upright: the tilt, a few degrees, is
+    /// left out of its orientation).
     pub fn box_to_input(&self, b: &Box3d) -> Box3d {
         let (s, c) = self.yaw.sin_cos();
         let t = self.translation;
         let (dx, dy) = (b.cx - t[0], b.cy - t[1]);
-        Box3d { cx: c * dx + s * dy, cy: -s * dx + c * dy, cz: b.cz - t[2], rot_z: wrap_angle(b.rot_z - self.yaw), ..*b }
+        let [cx, cy, cz] = self.unlevel([c * dx + s * dy, -s * dx + c * dy, b.cz - t[2]]);
+        Box3d { cx, cy, cz, rot_z: wrap_angle(b.rot_z - self.yaw), ..*b }
     }
 }
 
@@ -69,7 +101,9 @@ impl FromStr for SensorPose {
                 "y" => pose.translation[1] = v,
                 "z" => pose.translation[2] = v,
                 "yaw" => pose.yaw = v.to_radians(),
-                k => return Err(format!("unknown key `{k}` (keys: x, y, z in metres, yaw in degrees)")),
+                "roll" => pose.roll = v.to_radians(),
+                "pitch" => pose.pitch = v.to_radians(),
+                k => return Err(format!("unknown key `{k}` (keys: x, y, z in metres, yaw, roll, pitch in degrees)")),
             }
         }
         Ok(pose)
@@ -79,7 +113,78 @@ impl FromStr for SensorPose {
 impl fmt::Display for SensorPose {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let [x, y, z] = self.translation;
-        write!(f, "x={x},y={y},z={z},yaw={}", self.yaw.to_degrees())
+        write!(f, "x={x},y={y},z={z},yaw={}", self.yaw.to_degrees())?;
+        if self.roll != 0.0 || self.pitch != 0.0 {
+            write!(f, ",roll={},pitch={}", self.roll.to_degrees(), self.pitch.to_degrees())?;
+        }
+        Ok(())
+    }
+}
+
+/// How `detect` and `serve` place a cloud in the base frame: a given pose, or the ground found in
+/// the scan itself (`auto`: the sensor's height and tilt from a plane fit, the floor then put where
+/// the models learned it), with any yaw, x and y given beside it.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct FrameSpec {
+    /// The pose given (with `auto`, its yaw, x and y; its z, roll and pitch come from the ground).
+    pub pose: SensorPose,
+    /// Find the ground in each scan.
+    pub auto: bool,
+}
+
+/// How a scan was placed, for its report.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Placement {
+    /// The pose applied.
+    pub pose: SensorPose,
+    /// `given`, `ground: …` (what the fit found) or `no ground: … (the given pose kept)`.
+    pub how: String,
+}
+
+impl FrameSpec {
+    /// The pose for one scan in the input's frame.
+    pub fn place(&self, points: &[[f32; 3]]) -> Placement {
+        if !self.auto {
+            return Placement { pose: self.pose, how: "given".into() };
+        }
+        match fit_ground(points, &GroundSearch::default()) {
+            Ok(g) => {
+                let (roll, pitch) = g.levelling();
+                let [x, y, _] = self.pose.translation;
+                let pose = SensorPose { translation: [x, y, g.height + BASE_FLOOR_Z], roll, pitch, ..self.pose };
+                let how = format!(
+                    "ground: {:.2} m below the sensor, tilted {:.1}° ({} of {} returns around and below it on the plane)",
+                    g.height,
+                    g.tilt_deg(),
+                    g.inliers,
+                    g.candidates
+                );
+                Placement { pose, how }
+            }
+            Err(why) => Placement { pose: self.pose, how: format!("no ground: {why}; the given pose kept ({})", self.pose) },
+        }
+    }
+}
+
+/// `auto`, `auto,yaw=-90`, or a pose (see [`SensorPose`]'s keys).
+impl FromStr for FrameSpec {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        let mut auto = false;
+        let rest: Vec<&str> = s
+            .split(',')
+            .filter(|p| {
+                let is_auto = p.trim() == "auto";
+                auto |= is_auto;
+                !is_auto
+            })
+            .collect();
+        let pose: SensorPose = rest.join(",").parse()?;
+        if auto && (pose.translation[2] != 0.0 || pose.roll != 0.0 || pose.pitch != 0.0) {
+            return Err("`auto` finds z, roll and pitch from the ground; give only yaw, x or y beside it".into());
+        }
+        Ok(Self { pose, auto })
     }
 }
 
@@ -88,12 +193,43 @@ mod tests {
     use super::*;
 
     #[test]
+    fn auto_finds_a_raised_tilted_sensor_and_boxes_return_to_its_frame() {
+        // A floor 1.8 m below a sensor pitched 4°, in the sensor's frame.
+        let given = SensorPose { translation: [0.0, 0.0, 1.1], pitch: 0.07, ..Default::default() };
+        let truth = |p: [f32; 3]| given.to_base(p);
+        let mut pts = Vec::new();
+        for i in 0..4000 {
+            let (r, a) = (2.0 + (i % 97) as f64 * 0.25, i as f64 * 0.37);
+            // Points on the base floor (z = −0.7), mapped back into the sensor's frame.
+            let base = [r * a.cos(), r * a.sin(), BASE_FLOOR_Z];
+            pts.push(given.unlevel([base[0], base[1], base[2] - 1.1]).map(|v| v as f32));
+        }
+        let spec: FrameSpec = "auto".parse().unwrap();
+        let placed = spec.place(&pts);
+        assert!(placed.how.starts_with("ground: 1.80 m"), "{}", placed.how);
+        for p in pts.iter().step_by(97) {
+            let (a, b) = (placed.pose.to_base(*p), truth(*p));
+            assert!((0..3).all(|k| (a[k] - b[k]).abs() < 0.02), "{a:?} vs {b:?}");
+        }
+        let b = Box3d { cx: 5.0, cy: 1.0, cz: -0.7 + 0.85, l: 0.6, w: 0.5, h: 1.7, rot_z: 0.3 };
+        let back = placed.pose.box_to_input(&b);
+        let again = placed.pose.to_base([back.cx as f32, back.cy as f32, back.cz as f32]);
+        assert!((again[0] as f64 - b.cx).abs() < 1e-4 && (again[2] as f64 - b.cz).abs() < 1e-4);
+        // No ground in view: the given pose, said so.
+        let sky: Vec<[f32; 3]> = (0..500).map(|i| [i as f32 * 0.01, 1.0, 3.0]).collect();
+        let placed = "auto,yaw=90".parse::<FrameSpec>().unwrap().place(&sky);
+        assert!(placed.how.starts_with("no ground"), "{}", placed.how);
+        assert!((placed.pose.yaw - std::f64::consts::FRAC_PI_2).abs() < 1e-12);
+        assert!("auto,z=1".parse::<FrameSpec>().is_err());
+    }
+
+    #[test]
     fn parses_keys_in_metres_and_degrees() {
         let p: SensorPose = "z=-0.4, yaw=90".parse().unwrap();
         assert_eq!(p.translation, [0.0, 0.0, -0.4]);
         assert!((p.yaw - std::f64::consts::FRAC_PI_2).abs() < 1e-12);
         assert!("".parse::<SensorPose>().unwrap().is_identity());
-        assert!("roll=3".parse::<SensorPose>().unwrap_err().contains("unknown key"));
+        assert!("tilt=3".parse::<SensorPose>().unwrap_err().contains("unknown key"));
         assert!("z".parse::<SensorPose>().unwrap_err().contains("KEY=VALUE"));
         assert!("z=abc".parse::<SensorPose>().unwrap_err().contains("not a number"));
     }
@@ -101,7 +237,7 @@ mod tests {
     #[test]
     fn a_box_round_trips_with_its_points() {
         // Hand-derived: yaw 90° maps the input's x axis onto the base frame's y axis.
-        let pose = SensorPose { translation: [1.0, 2.0, 0.5], yaw: std::f64::consts::FRAC_PI_2 };
+        let pose = SensorPose { translation: [1.0, 2.0, 0.5], yaw: std::f64::consts::FRAC_PI_2, ..Default::default() };
         let p = pose.to_base([3.0, 0.0, 0.0]);
         assert!((p[0] - 1.0).abs() < 1e-6 && (p[1] - 5.0).abs() < 1e-6 && (p[2] - 0.5).abs() < 1e-6);
         // A box at that base point heading along base +y is, in the input, at (3, 0, 0) heading +x.

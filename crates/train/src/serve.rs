@@ -47,7 +47,7 @@ use crate::checkpoint::Slot;
 use crate::detect::{BoxRecord, FrameReport, find_people, format_name, panic_message};
 use crate::detector::RunDetector;
 use crate::render::render_bev_png;
-use crate::sensor_pose::SensorPose;
+use crate::sensor_pose::{FrameSpec, Placement};
 use crate::validate::FrameResult;
 
 /// How to serve.
@@ -65,8 +65,8 @@ pub struct ServeOptions {
     pub max_body_bytes: usize,
     /// Default score threshold (a request's `score_threshold` overrides it).
     pub score_threshold: f64,
-    /// The clients' sensor pose in the base frame.
-    pub pose: SensorPose,
+    /// The clients' sensor pose in the base frame, or the ground to find in each cloud.
+    pub frame: FrameSpec,
     /// Requests waiting for the model beyond this many wait for room (back-pressure).
     pub queue: usize,
     /// Clouds of more points than this get 413, refused from their header before decoding.
@@ -83,7 +83,7 @@ pub struct ServeOptions {
 struct Job {
     /// In the client's frame; `find_people` moves them and the boxes with the service's pose.
     points: Vec<[f32; 3]>,
-    pose: SensorPose,
+    frame: FrameSpec,
     score_threshold: f64,
     render: bool,
     reply: oneshot::Sender<Result<Answer, String>>,
@@ -95,8 +95,8 @@ struct Job {
 struct BodyRead(Arc<AtomicBool>);
 
 enum Answer {
-    /// The boxes and the points dropped outside the working volume.
-    Boxes(Vec<BoxRecord>, usize),
+    /// The boxes, the points dropped outside the working volume, and how the cloud was placed.
+    Boxes(Vec<BoxRecord>, usize, Placement),
     Png(Vec<u8>),
 }
 
@@ -105,7 +105,7 @@ struct AppState {
     jobs: mpsc::Sender<Job>,
     health: serde_json::Value,
     score_threshold: f64,
-    pose: SensorPose,
+    frame: FrameSpec,
     limits: ReadLimits,
     max_body_bytes: usize,
     /// The memory budget, one permit per KiB.
@@ -132,7 +132,7 @@ pub fn serve(opts: &ServeOptions) -> Result<()> {
             jobs,
             health,
             score_threshold: opts.score_threshold,
-            pose: opts.pose,
+            frame: opts.frame,
             // A compressed body may decode to no more than a body may hold.
             limits: ReadLimits { max_points: opts.max_points, max_data_bytes: opts.max_body_bytes },
             max_body_bytes: opts.max_body_bytes,
@@ -239,19 +239,20 @@ fn start_model_thread(opts: &ServeOptions, mut rx: mpsc::Receiver<Job>) -> Resul
             let range = cfg.eval.max_range.unwrap_or(25.0);
             let _ = ready_tx.send(Ok(health));
             while let Some(job) = rx.blocking_recv() {
-                let Job { points, pose, score_threshold, render, reply } = job;
+                let Job { points, frame, score_threshold, render, reply } = job;
                 if reply.is_closed() {
                     // Its client has gone or its time ran out while it waited.
                     continue;
                 }
                 // A panic inside the model answers 500 for this request; the service goes on.
                 let answer = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                    let found = find_people(&detector, &points, &pose, score_threshold);
+                    let placement = frame.place(&points);
+                    let found = find_people(&detector, &points, &placement.pose, score_threshold);
                     if render {
                         let frame = FrameResult { sequence: String::new(), name: "request".into(), gt: vec![], num_points: vec![], detections: found.base };
                         render_bev_png(&found.base_points, &frame, range).map(Answer::Png).map_err(|e| format!("{e:#}"))
                     } else {
-                        Ok(Answer::Boxes(found.input.iter().map(|d| BoxRecord::new(&d.bbox, d.score)).collect(), found.dropped_out_of_volume))
+                        Ok(Answer::Boxes(found.input.iter().map(|d| BoxRecord::new(&d.bbox, d.score)).collect(), found.dropped_out_of_volume, placement))
                     }
                 }))
                 .unwrap_or_else(|payload| Err(format!("the model failed on this cloud: {}", panic_message(&*payload))));
@@ -339,19 +340,20 @@ async fn detect_handler(State(state): State<AppState>, uri: axum::http::Uri, hea
     };
     let (n_points, dropped_non_finite) = (cloud.points.len(), cloud.dropped_non_finite);
     let (tx, rx) = oneshot::channel();
-    if state.jobs.send(Job { points: cloud.points, pose: state.pose, score_threshold, render, reply: tx }).await.is_err() {
+    if state.jobs.send(Job { points: cloud.points, frame: state.frame, score_threshold, render, reply: tx }).await.is_err() {
         return error(StatusCode::SERVICE_UNAVAILABLE, "the model is not running");
     }
     match rx.await {
         Ok(Ok(Answer::Png(png))) => ([(header::CONTENT_TYPE, "image/png")], png).into_response(),
-        Ok(Ok(Answer::Boxes(detections, dropped_out_of_volume))) => {
+        Ok(Ok(Answer::Boxes(detections, dropped_out_of_volume, placement))) => {
             let report = FrameReport {
                 source: "request body".into(),
                 format: format_name(format).into(),
                 points: n_points,
                 dropped_non_finite,
                 dropped_out_of_volume,
-                pose: state.pose.to_string(),
+                pose: placement.pose.to_string(),
+                frame: placement.how,
                 detections,
                 score_threshold,
             };

@@ -225,7 +225,7 @@ fn bad_inputs_are_named_and_the_others_still_written() {
     assert!(!res.status.success() && String::from_utf8_lossy(&res.stderr).contains("nowhere.pcd"));
     let res = train_bin(&["detect", dir.to_str().unwrap(), "--run", tmp.path().to_str().unwrap()]);
     assert!(!res.status.success() && String::from_utf8_lossy(&res.stderr).contains("not a run folder"));
-    let res = train_bin(&["detect", dir.to_str().unwrap(), "--run", w.to_str().unwrap(), "--transform", "pitch=3"]);
+    let res = train_bin(&["detect", dir.to_str().unwrap(), "--run", w.to_str().unwrap(), "--transform", "tilt=3"]);
     assert!(!res.status.success() && String::from_utf8_lossy(&res.stderr).contains("unknown key"));
 }
 
@@ -482,4 +482,37 @@ fn the_shipped_weights_are_found_from_any_working_directory() {
     let res = train_bin(&["detect", frame.to_str().unwrap(), "--run", w.to_str().unwrap(), "--checkpoint", "best", "--out", out.to_str().unwrap()]);
     let err = String::from_utf8_lossy(&res.stderr);
     assert!(!res.status.success() && err.contains("has no `best` checkpoint"), "{err}");
+}
+
+#[test]
+fn auto_finds_a_raised_tilted_sensor_and_reports_it() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (_, frames) = tree(tmp.path());
+    // The frame as a sensor 0.5 m higher than the base origin and pitched 3° would record it.
+    let pose: train::SensorPose = "z=0.5,pitch=3".parse().unwrap();
+    let inverse = |p: [f32; 3]| -> [f32; 3] {
+        // Undo the translation, then the pitch about y.
+        let (x, y, z) = (p[0] as f64, p[1] as f64, p[2] as f64 - 0.5);
+        let (s, c) = (-pose.pitch).sin_cos();
+        [(c * x + s * z) as f32, y as f32, (-s * x + c * z) as f32]
+    };
+    let sensor: Vec<[f32; 3]> = frames[0].points.iter().map(|&p| inverse(p)).collect();
+    for p in sensor.iter().step_by(5000) {
+        let back = pose.to_base(*p);
+        assert!((0..3).all(|k| (back[k] - frames[0].points[sensor.iter().position(|q| q == p).unwrap()][k]).abs() < 1e-4));
+    }
+    std::fs::write(tmp.path().join("raised.bin"), kitti_bin(&sensor)).unwrap();
+    let w = weights();
+    let given = tmp.path().join("given");
+    let auto = tmp.path().join("auto");
+    let file = tmp.path().join("raised.bin");
+    ok(&["detect", file.to_str().unwrap(), "--run", w.to_str().unwrap(), "--transform", "z=0.5,pitch=3", "--out", given.to_str().unwrap()]);
+    ok(&["detect", file.to_str().unwrap(), "--run", w.to_str().unwrap(), "--transform", "auto", "--out", auto.to_str().unwrap()]);
+    let (g, a) = (report(&given.join("json/raised.json")), report(&auto.join("json/raised.json")));
+    assert_eq!(g.frame, "given");
+    assert!(a.frame.starts_with("ground: 1.20 m below the sensor, tilted 3.0°"), "{}", a.frame);
+    // The same people, within a few centimetres (the fitted plane is not the exact one).
+    assert!(!g.detections.is_empty());
+    let near = g.detections.iter().filter(|d| a.detections.iter().any(|e| (d.x - e.x).hypot(d.y - e.y) < 0.1)).count();
+    assert!(near * 10 >= g.detections.len() * 9, "{near} of {} boxes found again", g.detections.len());
 }
