@@ -57,3 +57,38 @@ fn the_shipped_weights_configs_resolve() {
     }
     assert!(found >= 2, "Person-MinkUNet's and CenterPoint's weights ship with their configs");
 }
+
+/// Every key a resolved config holds (tables and leaves, by name), over every shipped run config.
+fn config_keys() -> std::collections::BTreeSet<String> {
+    fn walk(v: &toml::Value, keys: &mut std::collections::BTreeSet<String>) {
+        match v {
+            toml::Value::Table(t) => {
+                for (k, v) in t {
+                    keys.insert(k.clone());
+                    walk(v, keys);
+                }
+            }
+            toml::Value::Array(a) => a.iter().for_each(|v| walk(v, keys)),
+            _ => {}
+        }
+    }
+    let mut keys = std::collections::BTreeSet::new();
+    for path in tomls(&workspace().join("experiments")) {
+        let cfg = RunConfig::load(&path, &[]).unwrap();
+        walk(&toml::from_str(&cfg.to_toml().unwrap()).unwrap(), &mut keys);
+    }
+    keys
+}
+
+#[test]
+fn experiments_readme_documents_every_config_key_and_sweep_file() {
+    let readme = std::fs::read_to_string(workspace().join("experiments/README.md")).unwrap();
+    let missing: Vec<String> = config_keys().into_iter().filter(|k| !readme.contains(&format!("`{k}`")) && !readme.contains(&format!("`{k} ")) && !readme.contains(&format!("[{k}]")) && !readme.contains(&format!(".{k}]"))).collect();
+    assert!(missing.is_empty(), "keys not documented in experiments/README.md: {missing:?}");
+    let sweeps: Vec<String> = tomls(&workspace().join("experiments/sweeps"))
+        .iter()
+        .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
+        .filter(|name| !readme.contains(name.as_str()))
+        .collect();
+    assert!(sweeps.is_empty(), "sweep files not listed in experiments/README.md: {sweeps:?}");
+}
