@@ -20,15 +20,116 @@ pub enum CloudFormat {
     Npy,
 }
 
+/// What the readers, `detect`, `serve` and their messages know of one format: adding a format is
+/// a variant, a row of [`FORMATS`] and its parser in [`parse_cloud_within`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FormatInfo {
+    /// The format.
+    pub format: CloudFormat,
+    /// Its short name in reports and `?format=` (`pcd`).
+    pub name: &'static str,
+    /// Other names `?format=` accepts.
+    pub aliases: &'static [&'static str],
+    /// How messages call it (`KITTI .bin`).
+    pub title: &'static str,
+    /// File extensions, lower case, without the dot.
+    pub extensions: &'static [&'static str],
+    /// Media types a request may name it by, the preferred one first.
+    pub media_types: &'static [&'static str],
+    /// What in the bytes says it is this format, if anything.
+    pub signature: Option<&'static str>,
+}
+
+/// Every format read, in the order messages list them.
+pub const FORMATS: [FormatInfo; 3] = [
+    FormatInfo {
+        format: CloudFormat::Pcd,
+        name: "pcd",
+        aliases: &[],
+        title: "PCD",
+        extensions: &["pcd"],
+        media_types: &["application/x-pcd", "application/pcd", "text/x-pcd"],
+        signature: Some("a PCD header"),
+    },
+    FormatInfo {
+        format: CloudFormat::KittiBin,
+        name: "bin",
+        aliases: &["kitti"],
+        title: "KITTI .bin",
+        extensions: &["bin"],
+        media_types: &["application/x-kitti-bin"],
+        signature: None,
+    },
+    FormatInfo {
+        format: CloudFormat::Npy,
+        name: "npy",
+        aliases: &[],
+        title: ".npy",
+        extensions: &["npy"],
+        media_types: &["application/x-npy", "application/npy"],
+        signature: Some("NPY magic"),
+    },
+];
+
+/// `a, b or c`.
+fn or_list(items: impl IntoIterator<Item = String>) -> String {
+    let items: Vec<String> = items.into_iter().collect();
+    match items.split_last() {
+        Some((last, rest)) if !rest.is_empty() => format!("{} or {last}", rest.join(", ")),
+        Some((last, _)) => last.clone(),
+        None => String::new(),
+    }
+}
+
+impl FormatInfo {
+    /// The formats' titles for a message: `PCD, KITTI .bin or .npy`.
+    pub fn titles() -> String {
+        or_list(FORMATS.iter().map(|f| f.title.to_string()))
+    }
+
+    /// The extensions for a message: `.pcd, .bin or .npy`.
+    pub fn extensions() -> String {
+        or_list(FORMATS.iter().flat_map(|f| f.extensions.iter().map(|e| format!(".{e}"))))
+    }
+
+    /// The names `?format=` takes: `pcd|bin|npy`.
+    pub fn names() -> String {
+        FORMATS.iter().map(|f| f.name).collect::<Vec<_>>().join("|")
+    }
+
+    /// The preferred media types for a message.
+    pub fn media_types() -> String {
+        or_list(FORMATS.iter().map(|f| f.media_types[0].to_string()))
+    }
+
+    /// What the signed formats carry, for a message: `a PCD header or NPY magic`.
+    pub fn signatures() -> String {
+        or_list(FORMATS.iter().filter_map(|f| f.signature.map(str::to_string)))
+    }
+}
+
 impl CloudFormat {
+    /// Its row of [`FORMATS`].
+    pub fn info(self) -> &'static FormatInfo {
+        FORMATS.iter().find(|f| f.format == self).expect("every format has a row")
+    }
+
     /// The format a file's name says (`.pcd`, `.bin`, `.npy`, any case).
     pub fn from_extension(path: &Path) -> Option<Self> {
-        match path.extension()?.to_str()?.to_ascii_lowercase().as_str() {
-            "pcd" => Some(Self::Pcd),
-            "bin" => Some(Self::KittiBin),
-            "npy" => Some(Self::Npy),
-            _ => None,
-        }
+        let ext = path.extension()?.to_str()?.to_ascii_lowercase();
+        FORMATS.iter().find(|f| f.extensions.contains(&ext.as_str())).map(|f| f.format)
+    }
+
+    /// The format a short name or alias says (`pcd`, `bin`, `kitti`, `npy`, any case).
+    pub fn from_name(name: &str) -> Option<Self> {
+        let name = name.trim().to_ascii_lowercase();
+        FORMATS.iter().find(|f| f.name == name || f.aliases.contains(&name.as_str())).map(|f| f.format)
+    }
+
+    /// The format a media type names (parameters and case ignored).
+    pub fn from_media_type(content_type: &str) -> Option<Self> {
+        let essence = content_type.split(';').next().unwrap_or("").trim().to_ascii_lowercase();
+        FORMATS.iter().find(|f| f.media_types.contains(&essence.as_str())).map(|f| f.format)
     }
 
     /// The format the bytes announce: NPY's magic, or a PCD header's first keyword. A `.bin`
@@ -60,7 +161,10 @@ pub struct Cloud {
 pub fn read_cloud(path: &Path) -> Result<Cloud> {
     let bytes = std::fs::read(path).map_err(|e| DataError::io(path, e))?;
     let format = CloudFormat::sniff(&bytes).or_else(|| CloudFormat::from_extension(path)).ok_or_else(|| {
-        DataError::new(path, ErrorKind::Layout("not a point cloud this reads: no PCD header or NPY magic, and not named .pcd, .bin or .npy".into()))
+        DataError::new(
+            path,
+            ErrorKind::Layout(format!("not a point cloud this reads: no {}, and not named {}", FormatInfo::signatures(), FormatInfo::extensions())),
+        )
     })?;
     parse_cloud(&bytes, format).map_err(|kind| DataError::new(path, kind))
 }
@@ -233,6 +337,11 @@ mod tests {
         assert_eq!(CloudFormat::sniff(&[0u8; 32]), None);
         assert_eq!(CloudFormat::from_extension(Path::new("a/000001.BIN")), Some(CloudFormat::KittiBin));
         assert_eq!(CloudFormat::from_extension(Path::new("scan.ply")), None);
+        assert_eq!((CloudFormat::from_name("KITTI"), CloudFormat::from_name("ply")), (Some(CloudFormat::KittiBin), None));
+        assert_eq!(CloudFormat::from_media_type("Application/X-NPY; q=1"), Some(CloudFormat::Npy));
+        assert_eq!((FormatInfo::titles().as_str(), FormatInfo::extensions().as_str()), ("PCD, KITTI .bin or .npy", ".pcd, .bin or .npy"));
+        assert_eq!(FormatInfo::signatures(), "a PCD header or NPY magic");
+        assert!(FORMATS.iter().all(|f| f.format.info() == f));
     }
 
     #[test]

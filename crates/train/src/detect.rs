@@ -17,7 +17,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail, ensure};
 use data_jrdb::split::Layout;
-use data_jrdb::{Box3d, CloudFormat, DatasetConfig, JrdbDataset, Split, read_cloud};
+use data_jrdb::{Box3d, CloudFormat, DatasetConfig, FormatInfo, JrdbDataset, Split, read_cloud};
 use eval::jrdb::Detection;
 use eval::kitti::{FileKind, KittiObject};
 use indicatif::ProgressBar;
@@ -125,11 +125,7 @@ pub fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
 
 /// The short name of a cloud format, as reports give it.
 pub fn format_name(f: CloudFormat) -> &'static str {
-    match f {
-        CloudFormat::Pcd => "pcd",
-        CloudFormat::KittiBin => "bin",
-        CloudFormat::Npy => "npy",
-    }
+    f.info().name
 }
 
 /// Where one input frame's points come from.
@@ -213,7 +209,7 @@ fn add_path(p: &Path, inputs: &mut Vec<Input>) -> Result<()> {
     let mut files = Vec::new();
     walk(p, &mut files)?;
     files.sort();
-    ensure!(!files.is_empty(), "{}: no .pcd, .bin or .npy file in this folder or below", p.display());
+    ensure!(!files.is_empty(), "{}: no {} file in this folder or below", p.display(), FormatInfo::extensions());
     for f in files {
         let rel = f.strip_prefix(p).unwrap_or(&f).with_extension("");
         let name = rel.components().map(|c| c.as_os_str().to_string_lossy().into_owned()).collect::<Vec<_>>().join("/");

@@ -37,7 +37,7 @@ use axum::http::{HeaderMap, StatusCode, header};
 use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
 use axum::routing::{get, post};
-use data_jrdb::{CloudFormat, ErrorKind, ReadLimits, parse_cloud_within};
+use data_jrdb::{CloudFormat, ErrorKind, FormatInfo, ReadLimits, parse_cloud_within};
 use serde::Deserialize;
 use serde_json::json;
 use tokio::sync::{Semaphore, mpsc, oneshot};
@@ -150,7 +150,7 @@ pub fn serve(opts: &ServeOptions) -> Result<()> {
         let listener = tokio::net::TcpListener::bind(opts.addr).await.with_context(|| format!("binding {}", opts.addr))?;
         let addr = listener.local_addr()?;
         println!("listening on http://{addr}");
-        eprintln!("POST http://{addr}/detect with a point cloud (PCD, KITTI .bin or .npy); GET http://{addr}/health; SIGTERM or Ctrl-C stops");
+        eprintln!("POST http://{addr}/detect with a point cloud ({}); GET http://{addr}/health; SIGTERM or Ctrl-C stops", FormatInfo::titles());
         axum::serve(listener, app).with_graceful_shutdown(shutdown_signal()).await.context("serving")?;
         eprintln!("stopped: every request in flight was answered");
         Ok(())
@@ -322,7 +322,7 @@ async fn detect_handler(State(state): State<AppState>, uri: axum::http::Uri, hea
         Err(message) => return error(StatusCode::BAD_REQUEST, message),
     };
     if body.is_empty() {
-        return error(StatusCode::BAD_REQUEST, "empty body: POST a point cloud (PCD, KITTI .bin or .npy)");
+        return error(StatusCode::BAD_REQUEST, format!("empty body: POST a point cloud ({})", FormatInfo::titles()));
     }
     let format = match body_format(&body, format.as_deref(), &headers) {
         Ok(f) => f,
@@ -368,31 +368,23 @@ async fn detect_handler(State(state): State<AppState>, uri: axum::http::Uri, hea
 
 /// The body's format: its signature, else `format=`, else the content type; else 415.
 fn body_format(body: &[u8], query: Option<&str>, headers: &HeaderMap) -> Result<CloudFormat, Response> {
-    let named = |name: &str| match name.trim().to_ascii_lowercase().as_str() {
-        "pcd" => Some(CloudFormat::Pcd),
-        "bin" | "kitti" => Some(CloudFormat::KittiBin),
-        "npy" => Some(CloudFormat::Npy),
-        _ => None,
-    };
     if let Some(f) = CloudFormat::sniff(body) {
         return Ok(f);
     }
     if let Some(q) = query {
-        return named(q).ok_or_else(|| error(StatusCode::BAD_REQUEST, format!("format={q}: use pcd, bin or npy")));
+        return CloudFormat::from_name(q).ok_or_else(|| error(StatusCode::BAD_REQUEST, format!("format={q}: use {}", FormatInfo::names().replace('|', ", "))));
     }
     let content_type = headers.get(header::CONTENT_TYPE).and_then(|v| v.to_str().ok()).unwrap_or("");
-    let essence = content_type.split(';').next().unwrap_or("").trim().to_ascii_lowercase();
-    let by_type = match essence.as_str() {
-        "application/x-pcd" | "application/pcd" | "text/x-pcd" => Some(CloudFormat::Pcd),
-        "application/x-npy" | "application/npy" => Some(CloudFormat::Npy),
-        "application/x-kitti-bin" => Some(CloudFormat::KittiBin),
-        _ => None,
-    };
-    by_type.ok_or_else(|| {
+    CloudFormat::from_media_type(content_type).ok_or_else(|| {
         let said = if content_type.is_empty() { "no content type".to_string() } else { format!("content type `{content_type}`") };
         error(
             StatusCode::UNSUPPORTED_MEDIA_TYPE,
-            format!("unrecognised point-cloud format: the body has no PCD header or NPY magic and {said} names none; send ?format=pcd|bin|npy or Content-Type application/x-pcd, application/x-npy or application/x-kitti-bin"),
+            format!(
+                "unrecognised point-cloud format: the body has no {} and {said} names none; send ?format={} or Content-Type {}",
+                FormatInfo::signatures(),
+                FormatInfo::names(),
+                FormatInfo::media_types()
+            ),
         )
     })
 }
