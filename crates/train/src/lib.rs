@@ -12,7 +12,7 @@
 //!   fitted on frames not scored), [`render`] (BEV PNGs);
 //! - on the user's own clouds: [`sensor_pose`] (their frame in JRDB's), [`detect`] (files,
 //!   folders, trees → JSON, KITTI txt, PNG), [`serve`] (the same over HTTP);
-//! - many runs: [`sweep`].
+//! - many runs: [`sweep`] (its [`sweep::Executor`] seam: the local runner today), [`stats`].
 //!
 //! The binary (`cargo run -p train -- --help`) wraps [`trainer::train`], [`infer::infer`],
 //! [`sweep::run_sweep`], [`detect::detect`] and [`serve::serve`].
@@ -52,7 +52,9 @@ pub mod schedule;
 pub mod sensor_pose;
 /// The detection service over HTTP.
 pub mod serve;
-/// Sweeps over variants and seeds.
+/// Mean, spread and 95 % intervals over seeds.
+pub mod stats;
+/// Sweeps over variants and seeds, run by an [`sweep::Executor`].
 pub mod sweep;
 /// The training loop.
 pub mod trainer;

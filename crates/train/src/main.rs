@@ -492,43 +492,14 @@ fn main() -> ExitCode {
             }
             pin(b);
             if dry_run {
-                for j in jobs.iter().filter(|j| variants.is_empty() || variants.contains(&j.variant)) {
-                    println!("{} seed {} → {}", j.variant, j.seed, j.dir.display());
-                }
+                train::sweep::plan(&jobs, &variants)?.iter().for_each(|line| println!("{line}"));
                 return Ok(());
             }
-            if rescore {
-                train::sweep::check_variants(&jobs, &variants)?;
-                for j in jobs.iter().filter(|j| variants.is_empty() || variants.contains(&j.variant)) {
-                    eprintln!("rescoring {} seed {} ({})", j.variant, j.seed, j.dir.display());
-                    match train::sweep::rescore(j, true)? {
-                        None => eprintln!("  not finished, not rescored"),
-                        Some(s) => {
-                            if let Some(a) = s.last_ap3d {
-                                eprintln!("  AP3D@0.3/0.5/0.7 {:.1}/{:.1}/{:.1}", 100.0 * a[0], 100.0 * a[1], 100.0 * a[2]);
-                            }
-                        }
-                    }
-                }
-                let results = train::sweep::aggregate(&jobs);
-                results.write(&sweep.dir())?;
-                println!("{}", results.to_markdown());
-                println!("results in {}", sweep.dir().display());
-                return Ok(());
-            }
-            let results = train::run_sweep(
-                &sweep,
-                &jobs,
-                &variants,
-                |job| {
-                    let existing = if job.dir.join("config.toml").exists() { Existing::Resume } else { Existing::Refuse };
-                    job.config.backend.device()?;
-                    let run = RunDir::create(&job.dir, &job.config, existing)?;
-                    let opts = TrainOptions { resume: existing == Existing::Resume, max_steps, max_epochs, verbose: true };
-                    train::train(&job.config, &run, &opts)
-                },
-                true,
-            )?;
+            let results = if rescore {
+                train::sweep::rescore_all(&sweep, &jobs, &variants)?
+            } else {
+                train::sweep::run_sweep_with(&sweep, &jobs, &variants, &mut train::sweep::training(max_steps, max_epochs), true)?
+            };
             println!("{}", results.to_markdown());
             println!("results in {}", sweep.dir().display());
             Ok(())
