@@ -1,5 +1,5 @@
-//! Training augmentation (spec §1.5): a random scale and a random rotation about z, applied to the
-//! points and the boxes alike.
+//! Training augmentation, as the authors': a random scale and a random rotation about z, applied to
+//! the points and the boxes alike.
 //!
 //! Sign convention: points are rotated by R(α) (counter-clockwise, x toward y) and each box's
 //! `rot_z` grows by α, which keeps every point's in-box status under the `Box3d` convention. The

@@ -6,7 +6,7 @@ use serde::{Deserialize, Serialize};
 ///
 /// (cx, cy, cz) is the box centre. The footprint corners are `(cx, cy) + R(rot_z)·(±l/2, ±w/2)`
 /// with R the counter-clockwise rotation, so `l` lies along the heading; z spans `cz ± h/2`.
-/// This is the convention the official evaluator's converter implies (spec §6); every in-box
+/// This is the convention the official evaluator's converter implies (docs/data.md); every in-box
 /// test, augmentation, target and export goes through the methods here.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Box3d {

@@ -1,7 +1,8 @@
 //! `calibration/defaults.yaml`: the rigid transforms that bring each LiDAR into the base frame.
 //!
 //! The file gives `calibrated.lidar_{upper,lower}_to_rgb.{translation, rotation}`; the toolkit maps
-//! a sensor point p to the base frame as `Rz(rotation[2]) · (p − translation)` (spec §1.3).
+//! a sensor point p to the base frame as `Rz(rotation[2]) · (p − translation)`; the authors'
+//! `jrdb_transforms.py` hard-codes the same numbers.
 
 use std::path::Path;
 
@@ -150,7 +151,7 @@ mod tests {
             let b = t.to_base([q[0] as f32, q[1] as f32, q[2] as f32]);
             assert!((0..3).all(|k| (b[k] as f64 - p[k]).abs() < 1e-5));
         }
-        // The upper sensor sits 0.33529 m above the base origin (spec §1.3).
+        // The upper sensor sits 0.33529 m above the base origin (`calibration/defaults.yaml`).
         assert!((c.upper.origin()[2] - 0.33529).abs() < 1e-6);
         assert!((c.lower.origin()[2] + 0.13511).abs() < 1e-6);
     }

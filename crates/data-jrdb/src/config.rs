@@ -14,7 +14,7 @@ use crate::split::{DEFAULT_VAL_SEQUENCES, Split};
 use crate::volume::Volume;
 use crate::voxelize::{Pooling, VoxelConfig};
 
-/// Where the data is and how frames become samples (spec §1.2–§1.5).
+/// Where the data is and how frames become samples (docs/data.md, docs/model.md).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct DataConfig {
@@ -28,8 +28,9 @@ pub struct DataConfig {
     pub train_split: Split,
     /// Split validated on.
     pub val_split: Split,
-    /// The validation sequences (default: JRDB's 7, spec §1.2); an entry ending in `*` matches
-    /// every sequence that starts with what precedes it (`sim-val-*` for a simulated benchmark).
+    /// The validation sequences (default: JRDB's 7 suggested ones, docs/data.md); an entry ending
+    /// in `*` matches every sequence that starts with what precedes it (`sim-val-*` for a simulated
+    /// benchmark).
     pub val_sequences: Vec<String>,
     /// The working volume (metres, base frame): points outside are dropped before voxelization.
     pub volume: Volume,
@@ -41,7 +42,7 @@ pub struct DataConfig {
     /// so a cap trains on sparser frames than it is scored on.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub max_voxels: Option<usize>,
-    /// Training augmentation (spec §1.5).
+    /// Training augmentation (the authors' scale and rotation).
     pub augment: AugmentSection,
     /// Unreadable frames: `fail` or `skip` with a warning.
     pub on_bad_frame: OnBadFrame,
@@ -105,7 +106,7 @@ impl DataConfig {
     }
 }
 
-/// Training augmentation: `p ↦ s·R(α)·p`, `s ~ U(scale)`, `α ~ U(0, 2π)` (spec §1.5).
+/// Training augmentation: `p ↦ s·R(α)·p`, `s ~ U(scale)`, `α ~ U(0, 2π)` (the authors').
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct AugmentSection {

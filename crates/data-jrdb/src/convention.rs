@@ -1,5 +1,6 @@
-//! The box-convention check of spec §2.1: recount the points inside each labelled box under the
-//! `Box3d` convention and under the alternatives, and see which agrees with `num_points`.
+//! The box-convention check (JRDB's own tools disagree on the heading's sign, docs/data.md):
+//! recount the points inside each labelled box under the `Box3d` convention and under the
+//! alternatives, and see which agrees with `num_points`.
 
 use rayon::prelude::*;
 use serde::Serialize;

@@ -1,4 +1,4 @@
-//! Where a JRDB tree keeps its files, and which sequences belong to which split (spec §1.2, §2).
+//! Where a JRDB tree keeps its files, and which sequences belong to which split (docs/data.md).
 
 use std::path::{Path, PathBuf};
 

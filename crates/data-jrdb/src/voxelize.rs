@@ -1,8 +1,9 @@
-//! Voxelization (spec §1.4): one voxel per occupied cell, the first point's xyz as its feature.
+//! Voxelization (the authors'): one voxel per occupied cell, the first point's xyz as its feature.
 //!
 //! A point p lies in the voxel `round(p / voxel_size)` (ties to even, as NumPy rounds), so the
 //! voxel's cell is `[C − ½, C + ½] · voxel_size` and its centre is `C · voxel_size`. The authors'
-//! `(C + 0.5) · vs` reference sits half a voxel off; we use the true centre (spec §1.4 allows it).
+//! `(C + 0.5) · vs` reference sits half a voxel off; we use the true centre (the regression
+//! absorbs the difference).
 
 use std::collections::HashMap;
 use std::hash::{BuildHasherDefault, Hasher};

@@ -1,5 +1,5 @@
 //! JRDB 3D detection AP exactly as the official `detection_eval/evaluate_object.cpp` computes it
-//! (spec §6), plus clearly named non-official variants.
+//! (`JRDB-dataset/jrdb_toolkit`), plus clearly named non-official variants.
 //!
 //! The official protocol, step by step (each step is a function or a commented block below):
 //! 1. **Classes and filters** (`classify_gt`, `classify_det`): a GT with `num_points < 0` is

@@ -100,7 +100,7 @@ pub fn interval_overlap(lo_a: f64, hi_a: f64, lo_b: f64, hi_b: f64) -> f64 {
 }
 
 /// 3D IoU of upright boxes: footprint intersection × height overlap over the union volume,
-/// as the official tool defines it (spec §3).
+/// as the official `evaluate_object.cpp` defines it.
 pub fn iou_3d(a: &Box3d, b: &Box3d) -> f64 {
     let inter_area = bev_intersection_area(a, b);
     let dz = interval_overlap(

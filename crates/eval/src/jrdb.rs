@@ -1,6 +1,6 @@
 //! JRDB's own JSON: `labels_3d/<sequence>.json` ground truth, and pmunet's detection files.
 //!
-//! Ground truth (`labels/labels_3d/<sequence>.json`, JRDB's layout, spec §2):
+//! Ground truth (`labels/labels_3d/<sequence>.json`, JRDB's layout, docs/data.md):
 //! ```json
 //! {"labels": {"000000.pcd": [{"label_id": "pedestrian:46",
 //!     "box": {"cx": 1.0, "cy": 2.0, "cz": 0.1, "l": 0.9, "w": 0.5, "h": 1.7, "rot_z": 0.3},

@@ -1,5 +1,5 @@
 //! The official KITTI-style txt format of the JRDB tool: `DIR/<sequence>/<frame>.txt`, one object
-//! per line, 17 whitespace-separated columns, camera frame (spec §6):
+//! per line, 17 whitespace-separated columns, KITTI's camera frame:
 //!
 //! ```text
 //! type trunc occ num_points alpha x1 y1 x2 y2 h w l x y z ry score

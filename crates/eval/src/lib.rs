@@ -1,6 +1,6 @@
 //! Box geometry and metrics for pmunet: rotated BEV / 3D IoU, NMS, and the JRDB 3D detection AP
 //! computed *exactly* as the official `detection_eval/evaluate_object.cpp` of
-//! `JRDB-dataset/jrdb_toolkit` does (spec §6), so a number from pmunet is the leaderboard's number.
+//! `JRDB-dataset/jrdb_toolkit` does, so a number from pmunet is the leaderboard's number.
 //!
 //! Crate map:
 //! - [`geometry`]: exact convex clipping, [`bev_iou`], [`iou_3d`] of [`Box3d`].

@@ -1,5 +1,5 @@
 //! `eval`: JRDB 3D detection AP of a detection set against ground truth, as the official tool
-//! computes it (spec §6), plus non-official diagnostics clearly labelled.
+//! computes it (`evaluate_object.cpp`), plus non-official diagnostics clearly labelled.
 
 use std::path::PathBuf;
 

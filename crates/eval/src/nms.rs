@@ -1,5 +1,6 @@
-//! Greedy non-maximum suppression: the distance-based BEV NMS Person-MinkUNet uses (spec §1.12),
-//! CenterPoint's circle NMS and rotated BEV-IoU NMS, and the box voting that may follow any of them.
+//! Greedy non-maximum suppression: the distance-based BEV NMS Person-MinkUNet uses (the authors'
+//! `nms_3d_dist_gpu`), CenterPoint's circle NMS and rotated BEV-IoU NMS, and the box voting that
+//! may follow any of them.
 //!
 //! All three walk the candidates by descending score (ties keep input order), drop scores not above
 //! `score_threshold` (and NaN), and keep a candidate unless a box *already kept* suppresses it,
@@ -175,7 +176,7 @@ pub fn vote<S: Copy + Into<f64>>(
         .collect()
 }
 
-/// Whether kept box `a` suppresses `b` under the distance criterion of spec §1.12.
+/// Whether kept box `a` suppresses `b` under the distance criterion of the authors' `dist_bev`.
 pub fn distance_suppresses(a: &Box3d, b: &Box3d, cfg: &NmsConfig) -> bool {
     let (dx, dy) = (b.cx - a.cx, b.cy - a.cy);
     let d = dx.hypot(dy);

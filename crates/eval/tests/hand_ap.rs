@@ -1,4 +1,4 @@
-//! AP on small cases whose value is derived by hand from the official protocol (spec §6).
+//! AP on small cases whose value is derived by hand from the official `evaluate_object.cpp`.
 //!
 //! Recurring derivations (n = number of valid GT, all detections perfect unless stated):
 //! - `getThresholds` keeps the k-th best TP score when `(k+2)/n − k/40 ≥ k/40 − (k+1)/n`; for

@@ -1,9 +1,9 @@
 //! The model a run trains: what a training TOML's `[model]` table holds, tagged by `kind`; each
 //! detector's own settings live beside it (`person_minkunet::config`, `centerpoint::config`).
 //!
-//! Every field has the paper's (or, for CenterPoint, spec §4's) default and every struct is
-//! `#[serde(default, deny_unknown_fields)]`, so a TOML section may omit any field and a typo is an
-//! error. `kind = "person_minkunet"` or `kind = "centerpoint"` picks the model.
+//! Every field has the paper's (or, for CenterPoint, CenterPoint's adapted to people) default and
+//! every struct is `#[serde(default, deny_unknown_fields)]`, so a TOML section may omit any field
+//! and a typo is an error. `kind = "person_minkunet"` or `kind = "centerpoint"` picks the model.
 
 use serde::{Deserialize, Serialize};
 
@@ -15,9 +15,9 @@ use crate::post::PostProcessConfig;
 #[derive(Serialize, Deserialize, Debug, Clone, PartialEq)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum ModelConfig {
-    /// The sparse Person-MinkUNet (spec §1.6–1.12).
+    /// The sparse Person-MinkUNet (docs/model.md).
     PersonMinkunet(PersonMinkUNetConfig),
-    /// The dense CenterPoint-style baseline (spec §4).
+    /// The dense CenterPoint-style baseline (docs/model.md).
     Centerpoint(CenterPointConfig),
 }
 

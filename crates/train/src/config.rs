@@ -1,7 +1,7 @@
 //! The run configuration: one TOML file with every setting of a run, parsed strictly.
 //!
 //! Every struct here denies unknown keys, so a typo is an error that names the key instead of a
-//! silently ignored setting. Every key has a default (the paper's, spec §1.1 and §1.11) except
+//! silently ignored setting. Every key has a default (the authors' training settings) except
 //! `model.kind`; the fully resolved config, defaults included, is written into the run folder.
 //!
 //! ```toml
@@ -15,7 +15,7 @@
 //! [data.simulate]              # present: generate a simulated tree at `root` if it is missing
 //! [model]                      # kind = "person_minkunet" | "centerpoint" and its own keys
 //! [train]                      # epochs, batch size, Adam, schedule, validation cadence
-//! [train.schedule]             # kind = "exp_decay" (spec §1.11) | "constant" | "cosine"
+//! [train.schedule]             # kind = "exp_decay" (the authors') | "constant" | "cosine"
 //! [eval]                       # protocol (range, min points), val batching (NMS: [model.post])
 //! [kernels]                    # the op's kernel knobs: cpu = "auto" | "generic", gpu_tiled_min_cubes
 //! ```
@@ -70,7 +70,8 @@ fn default_out_dir() -> PathBuf {
     PathBuf::from("runs")
 }
 
-/// Optimisation (spec §1.11): Adam with AMSGrad, the lr set every iteration from the fractional epoch.
+/// Optimisation, as the authors': Adam with AMSGrad, the lr set every iteration from the
+/// fractional epoch.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct TrainConfig {

@@ -2,8 +2,8 @@
 //! variants × seeds and tabulates them.
 //!
 //! Crate map:
-//! - setup: [`config`] (the run's TOML), [`schedule`] (lr, spec §1.11), [`backend`] (flex, ndarray,
-//!   wgpu; threads), [`data`] (simulated data on first use, splits, loaders);
+//! - setup: [`config`] (the run's TOML), [`schedule`] (lr, the authors' decay), [`backend`]
+//!   (flex, ndarray, wgpu; threads), [`data`] (simulated data on first use, splits, loaders);
 //! - a run: [`run_dir`] (the folder), [`trainer`] (the loop), [`validate`] (AP3D with `eval`),
 //!   [`checkpoint`] (atomic best/latest, resume), [`metrics`] (CSV), [`plots`] (PNG), [`progress`];
 //! - after a run: [`detector`] ([`RunDetector`]: a run's model on point clouds), [`infer`]

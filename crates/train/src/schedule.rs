@@ -1,5 +1,5 @@
 //! Learning-rate schedules, evaluated at the fractional epoch `e = epoch + batch / batches_per_epoch`
-//! before every iteration (spec §1.11: the authors set the lr every iteration, not every epoch).
+//! before every iteration (the authors' `optim.py` sets the lr every iteration, not every epoch).
 
 use anyhow::{Result, bail};
 use serde::{Deserialize, Serialize};
@@ -8,8 +8,9 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum Schedule {
-    /// The authors' (spec §1.11): `lr0` until `epoch0`, then exponential decay reaching `lr1` at
-    /// `epoch1`: `lr0 · (lr1/lr0)^((e − epoch0)/(epoch1 − epoch0))`; `lr1` after `epoch1`.
+    /// The authors' (`lidar_det/pipeline/optim.py`): `lr0` until `epoch0`, then exponential decay
+    /// reaching `lr1` at `epoch1`: `lr0 · (lr1/lr0)^((e − epoch0)/(epoch1 − epoch0))`; `lr1` after
+    /// `epoch1`.
     ExpDecay {
         /// Initial lr.
         #[serde(default = "lr0")]

@@ -1,4 +1,4 @@
-//! The 2D BEV backbone (CenterPoint's `RPN`, spec §4): down blocks of 3×3 convolutions, an up
+//! The 2D BEV backbone (CenterPoint's `RPN`, `rpn.py`): down blocks of 3×3 convolutions, an up
 //! block per down block, outputs concatenated at one resolution.
 
 use sparse_conv::burn::module::Module;

@@ -7,7 +7,7 @@ use sparse_conv::burn::tensor::Device;
 use super::CenterPoint;
 use crate::post::PostProcessConfig;
 
-/// The CenterPoint-style dense baseline (spec §4; JRDB defaults of its last paragraph).
+/// The CenterPoint-style dense baseline: CenterPoint's defaults adapted to people (docs/model.md).
 #[derive(Serialize, Deserialize, Debug, Clone, PartialEq)]
 #[serde(default, deny_unknown_fields)]
 pub struct CenterPointConfig {
@@ -18,7 +18,7 @@ pub struct CenterPointConfig {
     /// Height range kept, metres (−1.0, 1.6).
     pub z_range: [f64; 2],
     /// Pillar (voxel) size, metres. The z size defaults to the whole z range (one pillar per BEV
-    /// cell); a smaller z size (the paper's (0.05, 0.05, 0.2)) stacks each height slice's encoded
+    /// cell); a smaller z size (such as 0.05 × 0.05 × 0.2 m point voxels) stacks each height slice's encoded
     /// features as extra BEV channels.
     pub voxel_size: [f64; 3],
     /// Points (voxels of the batch) kept per pillar (20).

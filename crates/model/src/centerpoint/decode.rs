@@ -1,5 +1,5 @@
-//! CenterPoint's decoding (spec §4): sigmoid heatmap, 3×3 max-pool peaks, top-K per sample, boxes
-//! from the regression channels, then the configured post-processing.
+//! CenterPoint's decoding, CenterNet-style: sigmoid heatmap, 3×3 max-pool peaks, top-K per sample,
+//! boxes from the regression channels, then the configured post-processing.
 
 use data_jrdb::Box3d;
 use sparse_conv::burn::tensor::Tensor;

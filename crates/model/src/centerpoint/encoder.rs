@@ -1,5 +1,5 @@
-//! Pillar feature encoder (PointPillars / CenterPoint `PillarFeatureNet`, spec §4) and the
-//! scatter to a dense BEV image.
+//! Pillar feature encoder (PointPillars / CenterPoint `PillarFeatureNet`, CenterPoint's
+//! `readers/pillar_encoder.py`) and the scatter to a dense BEV image.
 //!
 //! The "points" are the batch's voxels (raw xyz of each voxel's point), grouped into pillars on
 //! the CPU. Each point is decorated to `[x, y, z, x − x̄, y − ȳ, z − z̄, x − x_c, y − y_c]` (pillar

@@ -1,4 +1,4 @@
-//! CenterPoint's head (spec §4): a shared 3×3 conv, then one two-conv branch per task.
+//! CenterPoint's head (its `center_head.py`): a shared 3×3 conv, then one two-conv branch per task.
 //!
 //! Output channels, concatenated: `[0]` heatmap logit, `[1..3]` sub-cell offset (x, y), `[3]` z
 //! centre (m), `[4..7]` log l, w, h (m), `[7..9]` sin θ, cos θ.

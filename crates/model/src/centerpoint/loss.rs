@@ -1,6 +1,7 @@
-//! CenterPoint's loss (spec §4): CornerNet focal loss on the heatmap (α = 2, β = 4, predictions
-//! clamped to [1e-4, 1 − 1e-4], normalised by the number of objects) plus `reg_weight` × L1 on the
-//! eight regression values at the objects' centre cells (normalised by the number of objects).
+//! CenterPoint's loss (its `centernet_loss.py`): CornerNet focal loss on the heatmap (α = 2,
+//! β = 4, predictions clamped to [1e-4, 1 − 1e-4], normalised by the number of objects) plus
+//! `reg_weight` × L1 on the eight regression values at the objects' centre cells (normalised by
+//! the number of objects).
 
 use sparse_conv::burn::tensor::activation::sigmoid;
 use sparse_conv::burn::tensor::{Device, Int, Tensor, TensorData};

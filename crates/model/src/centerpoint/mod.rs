@@ -1,5 +1,5 @@
-//! The CenterPoint-style dense baseline (spec §4): pillar encoder → dense BEV image → 2D CNN →
-//! centre heatmap and box regression, built from Burn's own `Conv2d`, `BatchNorm` and
+//! The CenterPoint-style dense baseline (docs/model.md): pillar encoder → dense BEV image → 2D
+//! CNN → centre heatmap and box regression, built from Burn's own `Conv2d`, `BatchNorm` and
 //! `ConvTranspose2d`.
 
 /// 2D backbone with concatenated multi-scale outputs.

@@ -1,5 +1,5 @@
-//! CenterPoint's targets (spec §4): a Gaussian heatmap per sample with CenterNet's radius rule,
-//! and regression targets at each object's centre cell.
+//! CenterPoint's targets (its `AssignLabel`): a Gaussian heatmap per sample with CenterNet's radius
+//! rule, and regression targets at each object's centre cell.
 
 use data_jrdb::Batch;
 
@@ -27,7 +27,7 @@ impl HeatmapTargets {
 }
 
 /// CenterNet's `gaussian_radius((height, width), min_overlap)`, copied with its `(b + sq) / 2`
-/// quirk (spec §4): the smallest of three corner-shift radii.
+/// quirk, as CenterPoint's `center_utils.py` has it: the smallest of three corner-shift radii.
 pub fn gaussian_radius(height: f64, width: f64, min_overlap: f64) -> f64 {
     let (a1, b1, c1) = (1.0, height + width, width * height * (1.0 - min_overlap) / (1.0 + min_overlap));
     let r1 = (b1 + (b1 * b1 - 4.0 * a1 * c1).sqrt()) / 2.0;

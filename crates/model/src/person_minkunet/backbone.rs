@@ -1,4 +1,4 @@
-//! The MinkUNet backbone of Person-MinkUNet (SPVNAS layout, spec §1.6).
+//! The MinkUNet backbone of Person-MinkUNet (the SPVNAS layout of the authors' `nets/minkunet.py`).
 
 use burn::module::Module;
 use burn::tensor::Device;
@@ -42,7 +42,7 @@ impl MinkUNetConfig {
         *self.scaled_channels().last().expect("channels are not empty")
     }
 
-    /// A backbone with fresh parameters (spec §1.6 initialisation).
+    /// A backbone with fresh parameters (initialised as the authors' torchsparse 1.2 code does).
     pub fn init(&self, device: &Device) -> MinkUNet {
         assert!(
             self.channels.len() >= 3 && self.channels.len() % 2 == 1,
@@ -150,7 +150,7 @@ impl MinkUNet {
         let n = down.len();
         for (j, stage) in self.up.iter().enumerate() {
             let below = up.last().unwrap_or(&down[n - 1]).clone();
-            // Concatenation order is [upsampled, skip] (spec §1.6).
+            // Concatenation order is [upsampled, skip] (as in the authors' `minkunet.py`).
             let mut y = stage.deconv.forward(below).cat(&down[n - 2 - j]);
             for block in &stage.blocks {
                 y = block.forward(y);

@@ -1,6 +1,7 @@
-//! Person-MinkUNet's box encoding (spec §1.8): centre offsets from the voxel centre, log-dimensions
-//! against a mean size, and bin-based rotation with residuals for every bin; the offsets and the
-//! heading in the base frame (the authors') or in each voxel's ray frame ([`BoxFrame`]).
+//! Person-MinkUNet's box encoding (docs/model.md): centre offsets from the voxel centre,
+//! log-dimensions against a mean size, and bin-based rotation with residuals for every bin; the
+//! offsets and the heading in the base frame (the authors') or in each voxel's ray frame
+//! ([`BoxFrame`]).
 //!
 //! Head channel layout (`2·bins + 7` channels): `[0]` cls logit, `[1..4]` centre offset (m),
 //! `[4..7]` `log(l/l̄), log(w/w̄), log(h/h̄)`, `[7..7+bins]` bin logits, `[7+bins..7+2·bins]` bin
@@ -104,7 +105,7 @@ pub enum HeadingEncoding {
     AxisFacing,
 }
 
-/// A box encoded against one voxel centre: the regression targets of spec §1.9.
+/// A box encoded against one voxel centre: the regression targets of a foreground voxel.
 #[derive(Debug, Clone, PartialEq)]
 pub struct EncodedBox {
     /// Box centre − voxel centre, metres, in the coder's [`BoxFrame`].

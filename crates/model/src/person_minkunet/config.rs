@@ -8,7 +8,7 @@ use super::backbone::MinkUNetConfig;
 use super::box_coder::{BoxFrame, HeadingEncoding};
 use crate::post::PostProcessConfig;
 
-/// Which soft classification target (spec §1.9).
+/// Which soft classification target: the authors' code's or the paper's (docs/model.md).
 #[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq, Default)]
 #[serde(rename_all = "snake_case")]
 pub enum TargetVariant {
@@ -42,7 +42,7 @@ impl InputFeatures {
     }
 }
 
-/// Person-MinkUNet: MinkUNet backbone, per-voxel head, targets, loss and decoding (spec §1.6–1.12).
+/// Person-MinkUNet: MinkUNet backbone, per-voxel head, targets, loss and decoding (docs/model.md).
 #[derive(Serialize, Deserialize, Debug, Clone, PartialEq)]
 #[serde(default, deny_unknown_fields)]
 pub struct PersonMinkUNetConfig {

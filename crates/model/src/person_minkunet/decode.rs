@@ -1,5 +1,5 @@
-//! Person-MinkUNet's decoding (spec §1.12): a sigmoid score and a box for every voxel, then the
-//! configured post-processing per sample.
+//! Person-MinkUNet's decoding (the authors' `detector.py`): a sigmoid score and a box for every
+//! voxel, then the configured post-processing per sample.
 
 use data_jrdb::{Batch, Box3d};
 

@@ -1,6 +1,6 @@
-//! Person-MinkUNet's loss (spec §1.10): soft-target BCE over all voxels, and on foreground voxels
-//! centre MSE, log-dimension MSE, bin cross-entropy and residual MSE (or, with the heading as a
-//! sine and cosine, their MSE; with the axis and facing, a facing BCE besides the bins), each
+//! Person-MinkUNet's loss (docs/model.md): soft-target BCE over all voxels, and on foreground
+//! voxels centre MSE, log-dimension MSE, bin cross-entropy and residual MSE (or, with the heading
+//! as a sine and cosine, their MSE; with the axis and facing, a facing BCE besides the bins), each
 //! reported on its own.
 
 use sparse_conv::burn::tensor::activation::{log_sigmoid, log_softmax, relu};

@@ -1,17 +1,17 @@
-//! Person-MinkUNet: the MinkUNet backbone, a per-voxel linear head (spec §1.8), and the
+//! Person-MinkUNet: the MinkUNet backbone, a per-voxel linear head (docs/model.md), and the
 //! [`Detector`] implementation tying targets, loss and decoding together.
 
-/// The MinkUNet backbone (spec §1.6).
+/// The MinkUNet backbone (the SPVNAS layout, as the authors').
 pub mod backbone;
-/// The box encoding and head channel layout (spec §1.8).
+/// The box encoding and head channel layout (docs/model.md).
 pub mod box_coder;
 /// Settings: backbone shape, targets, loss weights, post-processing.
 pub mod config;
-/// Per-voxel boxes and scores from the head's output (spec §1.12).
+/// Per-voxel boxes and scores from the head's output (the authors' `detector.py`).
 pub mod decode;
-/// The five loss terms (spec §1.10).
+/// The five loss terms (docs/model.md).
 pub mod loss;
-/// Per-voxel classification and regression targets (spec §1.9).
+/// Per-voxel classification and regression targets (docs/model.md).
 pub mod targets;
 
 pub use backbone::{MinkUNet, MinkUNetConfig, UNetLevels};
@@ -44,7 +44,7 @@ pub struct PersonMinkUNet {
 }
 
 impl PersonMinkUNet {
-    /// A model with fresh parameters (spec §1.6 initialisation).
+    /// A model with fresh parameters (initialised as the authors' torchsparse 1.2 code does).
     pub fn new(config: &PersonMinkUNetConfig, device: &Device) -> Self {
         let backbone_cfg = config.backbone();
         let channels = head_channels(config.num_bins, config.heading);

@@ -1,4 +1,4 @@
-//! Person-MinkUNet's per-voxel targets (spec §1.9): nearest box centre, a soft classification
+//! Person-MinkUNet's per-voxel targets (docs/model.md): nearest box centre, a soft classification
 //! target, and the matched box's encoding on foreground voxels.
 
 use data_jrdb::{Batch, Box3d};
@@ -27,7 +27,7 @@ pub struct VoxelTargets {
     pub facing: Vec<f32>,
 }
 
-/// `t_c = in · (1 − clamp(d, 0, 1))` for voxel centre `v` and box `b` (spec §1.9): `in` is
+/// `t_c = in · (1 − clamp(d, 0, 1))` for voxel centre `v` and box `b` (docs/model.md): `in` is
 /// whether `v` lies in `b` enlarged by ε in l, w and h; `d` the centre distance over half the
 /// (enlarged) diagonal, in the code's or the paper's form.
 pub fn soft_target(v: [f64; 3], b: &Box3d, epsilon: f64, variant: TargetVariant) -> f64 {

@@ -1,4 +1,4 @@
-//! The blocks of a sparse U-Net (SPVNAS MinkUNet, spec §1.6).
+//! The blocks of a sparse U-Net (SPVNAS MinkUNet, its `core/models/semantic_kitti/minkunet.py`).
 
 use burn::config::Config;
 use burn::module::Module;

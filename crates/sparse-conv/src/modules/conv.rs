@@ -38,7 +38,7 @@ pub struct SubmanifoldConv3d {
 }
 
 impl SubmanifoldConv3dConfig {
-    /// Weights `U(±1/√(C_in·K))`, torchsparse's initialisation (spec §1.6).
+    /// Weights `U(±1/√(C_in·K))`, torchsparse 1.2's initialisation.
     pub fn init(&self, device: &Device) -> SubmanifoldConv3d {
         assert!(self.kernel_size % 2 == 1, "submanifold kernel size must be odd, got {}", self.kernel_size);
         let [c_in, c_out] = self.channels;
@@ -98,7 +98,7 @@ pub struct SparseConv3d {
 }
 
 impl SparseConv3dConfig {
-    /// Weights `U(±1/√(C_in·K))` (spec §1.6).
+    /// Weights `U(±1/√(C_in·K))` (torchsparse 1.2's initialisation).
     pub fn init(&self, device: &Device) -> SparseConv3d {
         let [c_in, c_out] = self.channels;
         let volume = self.kernel_size.pow(3);
@@ -136,7 +136,7 @@ pub struct SparseConvTranspose3dConfig {
 }
 
 /// Transposed convolution that reuses the down-sampling map of the same forward pass, so its
-/// outputs land exactly on the finer level's voxels (spec §1.7).
+/// outputs land exactly on the finer level's voxels (as torchsparse 1.2 does).
 #[derive(Module, Debug)]
 pub struct SparseConvTranspose3d {
     /// Weights `[K, C_in, C_out]`, one matrix per kernel offset.
@@ -146,7 +146,7 @@ pub struct SparseConvTranspose3d {
 }
 
 impl SparseConvTranspose3dConfig {
-    /// Weights `U(±1/√C_out)`: torchsparse 1.2's operator-precedence quirk, kept (spec §1.6).
+    /// Weights `U(±1/√C_out)`: torchsparse 1.2's operator-precedence quirk, as the authors have it.
     pub fn init(&self, device: &Device) -> SparseConvTranspose3d {
         let [c_in, c_out] = self.channels;
         let volume = self.kernel_size.pow(3);

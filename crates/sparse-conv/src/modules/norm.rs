@@ -13,7 +13,8 @@ use crate::ops::conv_norm::sparse_conv_norm_eval;
 use crate::geometry::kernel_map::KernelMap;
 use crate::ops::conv::sparse_conv;
 
-/// Configuration of a [`SparseBatchNorm`]; the defaults are PyTorch's `BatchNorm1d` (spec §1.6).
+/// Configuration of a [`SparseBatchNorm`]; the defaults are PyTorch's `BatchNorm1d`, which the
+/// authors' MinkUNet uses.
 #[derive(Config, Debug)]
 pub struct SparseBatchNormConfig {
     /// Channels.
