@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Soak test of `train serve`: many concurrent clients, valid clouds of several sizes mixed with
-every hostile input of issue 44, truncated bodies and slow or stalled senders, for a fixed time
-and at least a fixed number of requests. Reports requests by kind and status, the latency of the
+every hostile input (sizes claiming billions of points, far points, an LZF bomb, …), truncated
+bodies and slow or stalled senders, for a fixed time and at least a fixed number of requests. Reports requests by kind and status, the latency of the
 valid ones, and the service's resident memory at start, peak and end.
 
 It starts the service itself (so it can read its memory from /proc) unless --addr is given:

@@ -1,7 +1,8 @@
 //! Inputs written to hurt: every size a file states is checked against the bytes present before
-//! memory is taken for it. The hostile files of issue 44 get named errors; seeded mutations of
-//! valid files in every format (the short, CI-sized property check beside `fuzz/`) never panic and
-//! never hold more than a bounded multiple of their input. This binary counts the bytes each test
+//! memory is taken for it. Hand-written hostile files (sizes claiming billions of points,
+//! overflowing products, an LZF bomb) get named errors; seeded mutations of valid files in every
+//! format (the short, CI-sized property check beside `fuzz/`) never panic and never hold more
+//! than a bounded multiple of their input. This binary counts the bytes each test
 //! thread holds with its own allocator.
 
 use std::alloc::{GlobalAlloc, Layout, System};

@@ -351,7 +351,7 @@ fn the_service_answers_concurrent_valid_and_malformed_bodies() {
     assert_eq!(request(&server.addr, "GET", "/health", &[], b"").status, 200, "still healthy");
 }
 
-/// The hostile inputs of issue 44, as files: a 271-byte PCD claiming 4·10⁹ points (binary and
+/// Hostile inputs as files: a 271-byte PCD claiming 4·10⁹ points (binary and
 /// ascii), an `.npy` whose shape claims 10¹² × 3, points a million metres out, and finite rows at
 /// ±1e38 after NaN and infinite ones.
 fn hostile_files(dir: &Path, people: &[[f32; 3]]) {
