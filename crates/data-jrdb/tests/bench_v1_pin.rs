@@ -1,5 +1,5 @@
 //! `bench-v1` cannot drift: every figure in the README and `weights/README.md` was measured on it,
-//! so a simulator change that alters its frames must come as a new preset (docs/benchmark.md).
+//! so a simulator change that alters its frames must come as a new preset (docs/simulated-benchmark.md).
 //! The first eight sequences of the preset at seed 0 (halls, plazas and corridors, training and
 //! validation), two frames each, are generated and reduced to a digest of their points (to the millimetre), boxes (to a
 //! tenth of a millimetre) and counts. Generating fewer sequences or frames than the preset does not
@@ -57,6 +57,6 @@ fn bench_v1_frames_have_their_pinned_digest() {
     let pinned = (16, 835_908, 212, "9f4a32b0cda3d405".to_string());
     assert_eq!(
         got, pinned,
-        "bench-v1 changed: every published figure was measured on the old frames. If the simulator must change, add a new preset (docs/benchmark.md) and leave bench-v1's frames as they are."
+        "bench-v1 changed: every published figure was measured on the old frames. If the simulator must change, add a new preset (docs/simulated-benchmark.md) and leave bench-v1's frames as they are."
     );
 }
