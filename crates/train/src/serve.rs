@@ -11,7 +11,7 @@
 //!
 //! What clients can take is bounded: each body at most `--max-body-mb`, each cloud at most
 //! `--max-points` (checked from its header before it is decoded), all requests together at most
-//! `--memory-budget-mb` (a request reserves [`RESERVE_PER_BODY_BYTE`] times its announced body
+//! `--memory-budget-mb` (a request reserves [`RESERVE_PER_BODY_BYTE`](crate::serve::RESERVE_PER_BODY_BYTE) times its announced body
 //! before reading it and holds that until it is answered; others wait for room), and each request
 //! ends within `--timeout-s`. SIGTERM or Ctrl-C stops accepting, lets the requests in flight
 //! finish, and exits 0.

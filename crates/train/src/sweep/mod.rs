@@ -23,9 +23,10 @@
 //! `curves.png`. AP is the **last** validation of each run (no selection on the validation split);
 //! mean ± sample standard deviation (n − 1) over seeds.
 //!
-//! Here: the file format and its expansion into [`Job`]s; `executor`: who runs them (the
-//! [`Executor`] seam, the [`Local`] one that trains in this process, rescoring); `results`: the
-//! tables (statistics in [`crate::stats`]). A cluster executor is one more [`Executor`].
+//! Here: the file format and its expansion into [`Job`](crate::sweep::Job)s; `executor`: who runs
+//! them (the [`Executor`](crate::sweep::Executor) seam, the [`Local`](crate::sweep::Local) one that
+//! trains in this process, rescoring); `results`: the tables (statistics in [`crate::stats`]). A
+//! cluster executor is one more [`Executor`](crate::sweep::Executor).
 
 mod executor;
 mod results;
