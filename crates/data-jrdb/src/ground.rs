@@ -5,6 +5,8 @@
 
 use rand::{Rng, SeedableRng};
 
+use crate::sim::geometry::{cross, dot, sub};
+
 /// How the ground is searched for.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct GroundSearch {
@@ -109,7 +111,7 @@ pub fn fit_ground(points: &[[f32; 3]], s: &GroundSearch) -> Result<GroundPlane, 
         let [a, b, c] = [0, 1, 2].map(|_| candidates[rng.random_range(0..n)]);
         let (u, v) = (sub(b, a), sub(c, a));
         let mut normal = cross(u, v);
-        let len = norm(normal);
+        let len = dot(normal, normal).sqrt();
         if len < 1e-9 {
             continue;
         }
@@ -159,22 +161,6 @@ pub fn fit_ground(points: &[[f32; 3]], s: &GroundSearch) -> Result<GroundPlane, 
     }
     // normal · p + d = 0 with the origin above the plane: d > 0 is the height.
     Ok(GroundPlane { normal, height: d, inliers, candidates: n })
-}
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-}
-
-fn norm(a: [f64; 3]) -> f64 {
-    dot(a, a).sqrt()
 }
 
 /// `m · x = r` by Cramer's rule; `None` when `m` is singular.

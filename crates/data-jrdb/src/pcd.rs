@@ -371,7 +371,7 @@ pub(crate) fn parse_pcd_within(
     let record_bytes = || {
         rec.checked_mul(n).ok_or_else(|| ErrorKind::PcdHeader(format!("{n} points x {rec} bytes overflows")))
     };
-    let pc = match h.encoding {
+    Ok(match h.encoding {
         Encoding::Ascii => {
             // Every value takes a character and a separator: n points need 2·n·values − 1 bytes.
             let need = n.checked_mul(layout.values).and_then(|v| v.checked_mul(2)).map(|v| v.saturating_sub(1));
@@ -470,13 +470,12 @@ pub(crate) fn parse_pcd_within(
             for i in 0..n {
                 points.push(i, |f| {
                     let fd = &h.fields[f];
-                    h.fields[f].ty.decode(&raw[n * layout.byte[f] + i * fd.count * fd.ty.size()..])
+                    fd.ty.decode(&raw[n * layout.byte[f] + i * fd.count * fd.ty.size()..])
                 })?;
             }
             points.finish(h.encoding)
         }
-    };
-    Ok(pc)
+    })
 }
 
 fn parse_ascii(tok: &str, ty: FieldType) -> Option<f64> {

@@ -293,12 +293,19 @@ pub struct DetectParams {
 impl DetectParams {
     /// Parses a query string (without the `?`); `Err` is the message a 400 carries.
     pub fn from_query(query: Option<&str>, default_threshold: f64) -> Result<Self, String> {
-        let q: DetectQuery = match query {
-            None => DetectQuery { format: None, render: None, score_threshold: None },
-            Some(text) => {
-                let uri: axum::http::Uri = format!("/detect?{text}").parse().map_err(|_| format!("query `{text}` is not a valid URI query"))?;
-                Query::<DetectQuery>::try_from_uri(&uri).map_err(|e| format!("query: {}", e.body_text()))?.0
-            }
+        let uri: axum::http::Uri = match query {
+            None => axum::http::Uri::from_static("/detect"),
+            Some(text) => format!("/detect?{text}").parse().map_err(|_| format!("query `{text}` is not a valid URI query"))?,
+        };
+        Self::from_uri(&uri, default_threshold)
+    }
+
+    /// The options of a request's URI, as [`from_query`](Self::from_query).
+    pub fn from_uri(uri: &axum::http::Uri, default_threshold: f64) -> Result<Self, String> {
+        let q: DetectQuery = if uri.query().is_none() {
+            DetectQuery { format: None, render: None, score_threshold: None }
+        } else {
+            Query::<DetectQuery>::try_from_uri(uri).map_err(|e| format!("query: {}", e.body_text()))?.0
         };
         let render = match q.render.as_deref() {
             None | Some("0") | Some("false") => false,
@@ -317,7 +324,7 @@ async fn detect_handler(State(state): State<AppState>, uri: axum::http::Uri, hea
     if let Some(axum::Extension(flag)) = body_read {
         flag.0.store(true, Ordering::Release);
     }
-    let DetectParams { format, render, score_threshold } = match DetectParams::from_query(uri.query(), state.score_threshold) {
+    let DetectParams { format, render, score_threshold } = match DetectParams::from_uri(&uri, state.score_threshold) {
         Ok(p) => p,
         Err(message) => return error(StatusCode::BAD_REQUEST, message),
     };
