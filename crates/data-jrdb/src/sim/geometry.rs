@@ -68,6 +68,28 @@ pub enum Shape {
         /// Turn about z (radians).
         yaw: f64,
     },
+    /// Foliage: an upright ellipsoid a beam enters and stops in after a random free path (mean
+    /// `1 / density` metres), so a crown or a hedge returns a scattered volume, not a shell.
+    Foliage {
+        /// Centre.
+        c: V3,
+        /// Semi-axes along x, y, z.
+        radii: V3,
+        /// Leaves met per metre of beam.
+        density: f64,
+    },
+}
+
+/// A uniform number in (0, 1] from a ray's direction and a shape's centre: the same ray through
+/// the same foliage always stops at the same depth.
+fn ray_unit(d: V3, c: V3) -> f64 {
+    let mut z = 0x9E37_79B9_7F4A_7C15u64;
+    for v in [d[0], d[1], d[2], c[0], c[1], c[2]] {
+        z = (z ^ v.to_bits()).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z ^= z >> 29;
+    }
+    z = (z ^ (z >> 32)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    ((z >> 11) as f64 + 1.0) / (1u64 << 53) as f64
 }
 
 /// A ray hit: distance along the unit direction and the unit surface normal there.
@@ -92,7 +114,7 @@ impl Shape {
                 let m = [(a[0] + b[0]) / 2.0, (a[1] + b[1]) / 2.0];
                 Some((m, (a[0] - b[0]).hypot(a[1] - b[1]) / 2.0 + r))
             }
-            Shape::Ellipsoid { c, radii, .. } => Some(([c[0], c[1]], radii[0].max(radii[1]))),
+            Shape::Ellipsoid { c, radii, .. } | Shape::Foliage { c, radii, .. } => Some(([c[0], c[1]], radii[0].max(radii[1]))),
         }
     }
 
@@ -103,7 +125,7 @@ impl Shape {
             Shape::Cuboid { c, half, .. } => c[2] + half[2],
             Shape::Cylinder { z1, .. } => z1,
             Shape::Capsule { a, b, r } => a[2].max(b[2]) + r,
-            Shape::Ellipsoid { c, radii, .. } => c[2] + radii[2],
+            Shape::Ellipsoid { c, radii, .. } | Shape::Foliage { c, radii, .. } => c[2] + radii[2],
         }
     }
 
@@ -232,6 +254,24 @@ impl Shape {
                 let p = [lo[0] + t * ld[0], lo[1] + t * ld[1], lo[2] + t * ld[2]];
                 let n = [p[0] / (radii[0] * radii[0]), p[1] / (radii[1] * radii[1]), p[2] / (radii[2] * radii[2])];
                 Hit { t, normal: rot(norm(n), yaw) }
+            }
+            Shape::Foliage { c, radii, density } => {
+                let lo = sub(o, c);
+                let so = [lo[0] / radii[0], lo[1] / radii[1], lo[2] / radii[2]];
+                let sd = [d[0] / radii[0], d[1] / radii[1], d[2] / radii[2]];
+                let a = dot(sd, sd);
+                let b = dot(so, sd);
+                let disc = b * b - a * (dot(so, so) - 1.0);
+                if disc < 0.0 {
+                    return None;
+                }
+                let (t0, t1) = ((-b - disc.sqrt()) / a, (-b + disc.sqrt()) / a);
+                let t = t0.max(EPS) - ray_unit(d, c).ln() / density;
+                if t >= t1 {
+                    return None;
+                }
+                // Leaves face every way: the return is as bright as a square-on one.
+                Hit { t, normal: [-d[0], -d[1], -d[2]] }
             }
         };
         (h.t > EPS && h.t < t_max).then_some(h)

@@ -86,6 +86,25 @@ impl Body {
         }
     }
 
+    /// A body of `bench-v2`'s crowd: one in ten a child (1.0–1.45 m), adults 1.45–2.0 m, more
+    /// coats and bags than `sample`'s.
+    pub fn sample_crowd<R: Rng + ?Sized>(rng: &mut R) -> Self {
+        let child = rng.random_bool(0.1);
+        let mut b = Self::sample(rng);
+        let height = if child { rng.random_range(1.0..1.45) } else { rng.random_range(1.45..2.0) };
+        // Widths scale with height; a child is slimmer for their size.
+        let k = height / b.height * if child { 0.92 } else { 1.0 };
+        b.shoulder *= k;
+        b.hip *= k;
+        b.depth *= k.max(0.8);
+        b.leg_r *= k.max(0.75);
+        b.arm_r *= k.max(0.75);
+        b.height = height;
+        b.coat = rng.random_bool(0.3);
+        b.backpack = rng.random_bool(0.3);
+        b
+    }
+
     /// The body parts in the body frame for an activity at gait phase `phase` (radians).
     pub fn parts(&self, activity: Activity, phase: f64) -> Vec<Shape> {
         let h = self.height;
@@ -195,6 +214,7 @@ pub fn place(parts: &[Shape], x: f64, y: f64, floor: f64, yaw: f64) -> Vec<Shape
                 Shape::Cylinder { c: [q[0], q[1]], r, z0: z0 + floor, z1: z1 + floor }
             }
             Shape::PlaneZ(z) => Shape::PlaneZ(z + floor),
+            Shape::Foliage { c, radii, density } => Shape::Foliage { c: tr(c), radii, density },
         })
         .collect()
 }
@@ -215,7 +235,7 @@ pub fn tight_box(parts: &[Shape], x: f64, y: f64, floor: f64, yaw: f64) -> Box3d
                 grow(b, [r; 3]);
             }
             // Parts are built axis-aligned in the body frame (their own yaw is 0 there).
-            Shape::Ellipsoid { c, radii, .. } => grow(c, radii),
+            Shape::Ellipsoid { c, radii, .. } | Shape::Foliage { c, radii, .. } => grow(c, radii),
             Shape::Cuboid { c, half, .. } => grow(c, half),
             Shape::Cylinder { c, r, z0, z1 } => {
                 grow([c[0], c[1], z0], [r, r, 0.0]);

@@ -4,6 +4,7 @@
 use rand::Rng;
 
 use super::geometry::{Shape, rot};
+use super::objects::placed;
 use super::people::{Activity, Body, place, tight_box};
 use crate::box3d::Box3d;
 
@@ -16,6 +17,12 @@ pub enum SceneKind {
     Hall,
     /// An outdoor plaza between buildings, with trees, poles, benches and bins.
     Plaza,
+    /// A street: a road with kerbs, sidewalks, parked and passing vehicles, posts, trees and
+    /// facades or fences (`bench-v2`).
+    Street,
+    /// A campus: paved squares, raised lawns, stairs to terraces, railings, bicycle racks,
+    /// a service road (`bench-v2`).
+    Campus,
 }
 
 impl SceneKind {
@@ -23,7 +30,11 @@ impl SceneKind {
     pub fn for_sequence(name: &str) -> Self {
         const CORRIDORS: [&str; 3] = ["basement", "elevators", "corridor"];
         const HALLS: [&str; 10] = ["cafe", "auditorium", "aud", "lab", "meeting", "poster", "stlc", "huang-2", "gates-159", "hall"];
-        if CORRIDORS.iter().any(|k| name.contains(k)) {
+        if name.contains("street") {
+            SceneKind::Street
+        } else if name.contains("campus") {
+            SceneKind::Campus
+        } else if CORRIDORS.iter().any(|k| name.contains(k)) {
             SceneKind::Corridor
         } else if HALLS.iter().any(|k| name.contains(k)) {
             SceneKind::Hall
@@ -43,16 +54,28 @@ pub struct Prim {
 }
 
 #[derive(Debug, Clone)]
-struct Person {
-    body: Body,
-    activity: Activity,
-    x: f64,
-    y: f64,
-    yaw: f64,
+pub(super) struct Person {
+    pub(super) body: Body,
+    pub(super) activity: Activity,
+    pub(super) x: f64,
+    pub(super) y: f64,
+    pub(super) yaw: f64,
     phase: f64,
     /// Where a walker is heading; followers of a group copy their leader with an offset.
-    goal: [f64; 2],
-    follow: Option<(usize, [f64; 2])>,
+    pub(super) goal: [f64; 2],
+    pub(super) follow: Option<(usize, [f64; 2])>,
+    /// What they carry or push (an umbrella, a pushchair, a bicycle), in their body frame: seen
+    /// by the sensor, outside their labelled box.
+    pub(super) extras: Vec<(Shape, f32)>,
+}
+
+/// A vehicle driving along its heading.
+#[derive(Debug, Clone)]
+pub(super) struct Mover {
+    /// Its body in its own frame.
+    pub(super) parts: Vec<(Shape, f32)>,
+    /// Position, heading and speed (m/s).
+    pub(super) pose: [f64; 4],
 }
 
 /// A scene that evolves over the frames of one sequence.
@@ -66,12 +89,20 @@ pub struct Scene {
     pub statics: Vec<Prim>,
     /// Walkable area (xmin, xmax, ymin, ymax) for people and the robot.
     pub area: [f64; 4],
-    people: Vec<Person>,
+    pub(super) people: Vec<Person>,
     /// Robot pose in the world (x, y, yaw) and speed.
     pub robot: [f64; 3],
-    robot_speed: f64,
+    pub(super) robot_speed: f64,
     /// Footprints (x, y, radius) of obstacles people avoid.
-    obstacles: Vec<[f64; 3]>,
+    pub(super) obstacles: Vec<[f64; 3]>,
+    /// Ground raised above the floor (sidewalks, lawns, terraces): x0, x1, y0, y1 and its top.
+    pub(super) raised: Vec<[f64; 5]>,
+    /// Passing vehicles.
+    pub(super) movers: Vec<Mover>,
+    /// People are drawn from the varied crowd of `bench-v2` (`Body::sample_crowd`, things carried).
+    pub(super) crowd: bool,
+    /// People are placed at least this far from the sensor's platform (m).
+    pub(super) keep_clear: f64,
 }
 
 /// A labelled person in one frame: world-frame box and stable id.
@@ -91,12 +122,14 @@ impl Scene {
     /// Builds a scene of `kind` with up to `max_people` people.
     pub fn generate<R: Rng + ?Sized>(kind: SceneKind, max_people: usize, rng: &mut R) -> Self {
         let floor = -rng.random_range(0.68..0.74);
-        let mut s = Scene { kind, floor, statics: Vec::new(), area: [0.0; 4], people: Vec::new(), robot: [0.0; 3], robot_speed: 0.0, obstacles: Vec::new() };
+        let mut s = Scene::empty(kind, floor);
         s.add(Shape::PlaneZ(floor), 0.25);
         match kind {
             SceneKind::Corridor => s.corridor(rng),
             SceneKind::Hall => s.hall(rng),
             SceneKind::Plaza => s.plaza(rng),
+            SceneKind::Street => s.street(false, rng),
+            SceneKind::Campus => s.campus(false, rng),
         }
         s.robot_speed = if rng.random_bool(0.4) { 0.0 } else { rng.random_range(0.2..0.8) };
         s.robot[2] = rng.random_range(-0.3..0.3);
@@ -108,11 +141,33 @@ impl Scene {
         s
     }
 
-    fn add(&mut self, shape: Shape, reflectivity: f32) {
+    pub(super) fn empty(kind: SceneKind, floor: f64) -> Self {
+        Scene {
+            kind,
+            floor,
+            statics: Vec::new(),
+            area: [0.0; 4],
+            people: Vec::new(),
+            robot: [0.0; 3],
+            robot_speed: 0.0,
+            obstacles: Vec::new(),
+            raised: Vec::new(),
+            movers: Vec::new(),
+            crowd: false,
+            keep_clear: 0.0,
+        }
+    }
+
+    /// The ground's height at (x, y): the floor, or the top of the raised ground there.
+    pub fn ground_at(&self, x: f64, y: f64) -> f64 {
+        self.raised.iter().filter(|r| x >= r[0] && x <= r[1] && y >= r[2] && y <= r[3]).map(|r| r[4]).fold(self.floor, f64::max)
+    }
+
+    pub(super) fn add(&mut self, shape: Shape, reflectivity: f32) {
         self.statics.push(Prim { shape, reflectivity });
     }
 
-    fn obstacle(&mut self, shape: Shape, reflectivity: f32) {
+    pub(super) fn obstacle(&mut self, shape: Shape, reflectivity: f32) {
         if let Some((c, r)) = shape.bounds_xy() {
             self.obstacles.push([c[0], c[1], r]);
         }
@@ -120,7 +175,7 @@ impl Scene {
     }
 
     /// Person-sized things that are not people: bins, poles, plants, signs, bollards.
-    fn clutter<R: Rng + ?Sized>(&mut self, x: f64, y: f64, rng: &mut R) {
+    pub(super) fn clutter<R: Rng + ?Sized>(&mut self, x: f64, y: f64, rng: &mut R) {
         let f = self.floor;
         match rng.random_range(0..6) {
             0 => self.obstacle(Shape::Cylinder { c: [x, y], r: rng.random_range(0.18..0.3), z0: f, z1: f + rng.random_range(0.7..1.1) }, 0.4),
@@ -146,7 +201,7 @@ impl Scene {
         }
     }
 
-    fn table<R: Rng + ?Sized>(&mut self, x: f64, y: f64, yaw: f64, rng: &mut R) {
+    pub(super) fn table<R: Rng + ?Sized>(&mut self, x: f64, y: f64, yaw: f64, rng: &mut R) {
         let f = self.floor;
         let (sx, sy) = (rng.random_range(0.7..1.8), rng.random_range(0.6..0.9));
         let top = rng.random_range(0.72..0.76);
@@ -157,7 +212,7 @@ impl Scene {
         }
     }
 
-    fn chair(&mut self, x: f64, y: f64, yaw: f64, seat: f64) {
+    pub(super) fn chair(&mut self, x: f64, y: f64, yaw: f64, seat: f64) {
         let f = self.floor;
         self.obstacle(cuboid(x, y, f + seat - 0.05, 0.45, 0.45, 0.05, yaw), 0.4);
         let b = rot([-0.22, 0.0, 0.0], yaw);
@@ -170,7 +225,7 @@ impl Scene {
 
     /// A wall along x (`along_x`) or y from `a` to `b` at the other coordinate `at`, with door gaps.
     #[allow(clippy::too_many_arguments)] // one wall: its line, extent, height and doors
-    fn wall<R: Rng + ?Sized>(&mut self, along_x: bool, at: f64, a: f64, b: f64, height: f64, gaps: usize, rng: &mut R) {
+    pub(super) fn wall<R: Rng + ?Sized>(&mut self, along_x: bool, at: f64, a: f64, b: f64, height: f64, gaps: usize, rng: &mut R) {
         let mut cuts: Vec<(f64, f64)> = (0..gaps)
             .map(|_| {
                 let c = rng.random_range(a + 2.0..b - 2.0);
@@ -191,7 +246,7 @@ impl Scene {
         }
     }
 
-    fn corridor<R: Rng + ?Sized>(&mut self, rng: &mut R) {
+    pub(super) fn corridor<R: Rng + ?Sized>(&mut self, rng: &mut R) {
         let w = rng.random_range(2.4..5.0);
         let (x0, x1) = (-rng.random_range(10.0..40.0), rng.random_range(20.0..60.0));
         let ceil = self.floor + rng.random_range(2.6..3.3);
@@ -225,7 +280,7 @@ impl Scene {
         self.robot[1] = rng.random_range(-0.2..0.2);
     }
 
-    fn hall<R: Rng + ?Sized>(&mut self, rng: &mut R) {
+    pub(super) fn hall<R: Rng + ?Sized>(&mut self, rng: &mut R) {
         let (lx, ly) = (rng.random_range(15.0..35.0), rng.random_range(12.0..30.0));
         let (x0, y0) = (-rng.random_range(0.3..0.7) * lx, -rng.random_range(0.3..0.7) * ly);
         let (x1, y1) = (x0 + lx, y0 + ly);
@@ -279,7 +334,7 @@ impl Scene {
         self.area = [x0 + 0.5, x1 - 0.5, y0 + 0.5, y1 - 0.5];
     }
 
-    fn plaza<R: Rng + ?Sized>(&mut self, rng: &mut R) {
+    pub(super) fn plaza<R: Rng + ?Sized>(&mut self, rng: &mut R) {
         let (lx, ly) = (rng.random_range(40.0..90.0), rng.random_range(30.0..70.0));
         let (x0, y0) = (-rng.random_range(0.25..0.6) * lx, -rng.random_range(0.3..0.7) * ly);
         let (x1, y1) = (x0 + lx, y0 + ly);
@@ -320,7 +375,7 @@ impl Scene {
         self.area = [ax0, ax1, ay0, ay1];
     }
 
-    fn free<R: Rng + ?Sized>(&self, rng: &mut R, margin: f64) -> Option<[f64; 2]> {
+    pub(super) fn free<R: Rng + ?Sized>(&self, rng: &mut R, margin: f64) -> Option<[f64; 2]> {
         let [x0, x1, y0, y1] = self.area;
         for _ in 0..200 {
             // Most people within 25 m of the robot, as in JRDB's labels.
@@ -336,12 +391,15 @@ impl Scene {
             if self.people.iter().any(|p| (p.x - x).hypot(p.y - y) < 0.5 + margin) {
                 continue;
             }
+            if self.keep_clear > 0.0 && (self.robot[0] - x).hypot(self.robot[1] - y) < self.keep_clear {
+                continue;
+            }
             return Some([x, y]);
         }
         None
     }
 
-    fn populate<R: Rng + ?Sized>(&mut self, n: usize, rng: &mut R) {
+    pub(super) fn populate<R: Rng + ?Sized>(&mut self, n: usize, rng: &mut R) {
         while self.people.len() < n {
             let Some([x, y]) = self.free(rng, 0.4) else { break };
             let roll = rng.random_range(0..10);
@@ -355,7 +413,9 @@ impl Scene {
                     let off = [-(k as f64 / 2.0).floor() * 0.8, if k % 2 == 0 { 0.0 } else { 0.65 }];
                     let follow = (k > 0).then_some((lead, off));
                     let o = rot([off[0], off[1], 0.0], yaw);
-                    self.people.push(Person { body: Body::sample(rng), activity: Activity::Walking { speed }, x: x + o[0], y: y + o[1], yaw, phase: rng.random_range(0.0..std::f64::consts::TAU), goal, follow });
+                    let body = self.body(rng);
+                    let extras = if follow.is_none() { self.carried(&body, rng) } else { Vec::new() };
+                    self.people.push(Person { body, activity: Activity::Walking { speed }, x: x + o[0], y: y + o[1], yaw, phase: rng.random_range(0.0..std::f64::consts::TAU), goal, follow, extras });
                 }
             } else if roll < 8 || self.kind == SceneKind::Corridor {
                 // A standing group faces its centre.
@@ -364,12 +424,14 @@ impl Scene {
                     let a = yaw + k as f64 * std::f64::consts::TAU / group as f64;
                     let (px, py) = (x + rad * a.cos(), y + rad * a.sin());
                     let face = if group == 1 { yaw } else { a + std::f64::consts::PI + rng.random_range(-0.3..0.3) };
-                    self.people.push(Person { body: Body::sample(rng), activity: Activity::Standing, x: px, y: py, yaw: face, phase: 0.0, goal: [px, py], follow: None });
+                    let body = self.body(rng);
+                    self.people.push(Person { body, activity: Activity::Standing, x: px, y: py, yaw: face, phase: 0.0, goal: [px, py], follow: None, extras: Vec::new() });
                 }
             } else {
                 let seat = rng.random_range(0.42..0.5);
                 self.chair(x - 0.05 * yaw.cos(), y - 0.05 * yaw.sin(), yaw, seat);
-                self.people.push(Person { body: Body::sample(rng), activity: Activity::Sitting { seat }, x, y, yaw, phase: 0.0, goal: [x, y], follow: None });
+                let body = self.body(rng);
+                self.people.push(Person { body, activity: Activity::Sitting { seat }, x, y, yaw, phase: 0.0, goal: [x, y], follow: None, extras: Vec::new() });
             }
         }
     }
@@ -415,6 +477,10 @@ impl Scene {
             p.y = (p.y + speed * dt * p.yaw.sin()).clamp(y0, y1);
             p.phase += dt * speed * std::f64::consts::TAU / (0.75 * p.body.height);
         }
+        for m in &mut self.movers {
+            let [x, y, yaw, v] = m.pose;
+            m.pose = [x + v * dt * yaw.cos(), y + v * dt * yaw.sin(), yaw, v];
+        }
         // The robot drives forward, turning back toward the middle near the area's edge.
         let [rx, ry, ryaw] = self.robot;
         let (cx, cy) = ((x0 + x1) / 2.0, (y0 + y1) / 2.0);
@@ -435,10 +501,24 @@ impl Scene {
         for (id, p) in self.people.iter().enumerate() {
             let parts = p.body.parts(p.activity, p.phase);
             let refl = 0.15 + 0.5 * ((id * 7919) % 100) as f32 / 100.0;
-            prims.extend(place(&parts, p.x, p.y, self.floor, p.yaw).into_iter().map(|shape| Prim { shape, reflectivity: refl }));
-            views.push(PersonView { id, bbox: tight_box(&parts, p.x, p.y, self.floor, p.yaw) });
+            let ground = self.ground_at(p.x, p.y);
+            prims.extend(place(&parts, p.x, p.y, ground, p.yaw).into_iter().map(|shape| Prim { shape, reflectivity: refl }));
+            for (shape, reflectivity) in placed(p.extras.clone(), p.x, p.y, ground, p.yaw) {
+                prims.push(Prim { shape, reflectivity });
+            }
+            views.push(PersonView { id, bbox: tight_box(&parts, p.x, p.y, ground, p.yaw) });
         }
         (prims, views)
+    }
+
+    /// The passing vehicles' surfaces now (world frame).
+    pub fn movers_now(&self) -> Vec<Prim> {
+        let mut prims = Vec::new();
+        for m in &self.movers {
+            let [x, y, yaw, _] = m.pose;
+            prims.extend(placed(m.parts.clone(), x, y, self.floor, yaw).into_iter().map(|(shape, reflectivity)| Prim { shape, reflectivity }));
+        }
+        prims
     }
 
     /// World frame → the robot's base frame at its current pose.

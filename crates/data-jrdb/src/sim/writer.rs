@@ -7,7 +7,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
-use super::lidar::Vlp16;
+use super::lidar::Scanner;
 use super::scene::{Scene, SceneKind};
 use crate::calibration::{Calibration, Lidar};
 use crate::error::{DataError, Result};
@@ -38,6 +38,21 @@ pub struct SynthConfig {
     pub frame_step: usize,
     /// How sequences are named, which decides their split and kind of place.
     pub naming: Naming,
+    /// The world simulated: bench-v1's scenes and rig, or bench-v2's.
+    pub world: World,
+}
+
+/// The simulator's generations; a new one never changes what an older one writes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum World {
+    /// JRDB-like corridors, halls and plazas seen by JRDB's two VLP-16 at a fixed height.
+    #[default]
+    V1,
+    /// Streets, campuses and furnished indoor places, a varied crowd, one of ten sensors (or
+    /// JRDB's pair) on a car, robot or mast 0.3–2.2 m up and tipped a few degrees, the platform's
+    /// own body in view; each cloud written levelled, the ground under the platform at the base
+    /// frame's floor (`World::V2` writes it as the upper sensor's cloud; the lower one is empty).
+    V2,
 }
 
 /// Names of simulated sequences.
@@ -52,6 +67,9 @@ pub enum Naming {
     /// validation one (select them with `sim-val-*`), places in turn (2 halls, 2 plazas, 1
     /// corridor in 5), any number of sequences.
     Benchmark,
+    /// As `benchmark`, with bench-v2's places in turn: 2 streets, 2 campuses, a hall, a plaza
+    /// and a corridor in 7.
+    Places,
 }
 
 /// The named simulated benchmarks.
@@ -62,6 +80,9 @@ pub enum Preset {
     /// people; 120 training sequences (1,200 frames) and 40 validation ones (400 frames) from
     /// scenes disjoint from them.
     BenchV1,
+    /// `bench-v2`: as large (160 sequences of 10 frames, 120 for training, 40 for validation), in
+    /// [`World::V2`]: streets, campuses and cluttered indoor places, many sensors and platforms.
+    BenchV2,
 }
 
 impl Preset {
@@ -69,6 +90,7 @@ impl Preset {
     pub fn name(self) -> &'static str {
         match self {
             Preset::BenchV1 => "bench-v1",
+            Preset::BenchV2 => "bench-v2",
         }
     }
 
@@ -82,6 +104,16 @@ impl Preset {
                 max_people: 40,
                 frame_step: 5,
                 naming: Naming::Benchmark,
+                ..SynthConfig::default()
+            },
+            Preset::BenchV2 => SynthConfig {
+                sequences: 160,
+                frames: 10,
+                seed,
+                max_people: 40,
+                frame_step: 5,
+                naming: Naming::Places,
+                world: World::V2,
                 ..SynthConfig::default()
             },
         }
@@ -100,6 +132,7 @@ impl Default for SynthConfig {
             label_range: 35.0,
             frame_step: 1,
             naming: Naming::Jrdb,
+            world: World::V1,
         }
     }
 }
@@ -140,17 +173,24 @@ pub fn names_for(naming: Naming, n: usize) -> Vec<String> {
                 format!("sim-{split}-{place}-{i:03}")
             })
             .collect(),
+        Naming::Places => (0..n)
+            .map(|i| {
+                let split = if i % 4 == 1 { "val" } else { "train" };
+                let place = ["street", "campus", "hall", "street", "plaza", "campus", "corridor"][i % 7];
+                format!("sim-{split}-{place}-{i:03}")
+            })
+            .collect(),
     }
 }
 
-fn mix(a: u64, b: u64) -> u64 {
+pub(super) fn mix(a: u64, b: u64) -> u64 {
     let mut z = a ^ b.wrapping_mul(0x9E37_79B9_7F4A_7C15).wrapping_add(0x632B_E59B_D9B4_E019);
     z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
     z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
     z ^ (z >> 31)
 }
 
-fn mkdir(p: &Path) -> Result<()> {
+pub(super) fn mkdir(p: &Path) -> Result<()> {
     std::fs::create_dir_all(p).map_err(|e| DataError::io(p, e))
 }
 
@@ -167,11 +207,22 @@ pub fn synth(out: &Path, cfg: &SynthConfig) -> Result<SynthSummary> {
     let names = names_for(cfg.naming, cfg.sequences);
     let mut summary = SynthSummary { sequences: names.clone(), ..Default::default() };
     // Sequences one after another; the rays of each scan run in parallel.
+    let mut clutter = Vec::new();
     for (si, seq) in names.iter().enumerate() {
-        let (f, p, b) = synth_sequence(&layout, seq, si as u64, cfg, &calib)?;
+        let (f, p, b) = match cfg.world {
+            World::V1 => synth_sequence(&layout, seq, si as u64, cfg, &calib)?,
+            World::V2 => {
+                let (f, p, b, c) = super::world_v2::synth_sequence(&layout, seq, si as u64, cfg, &calib)?;
+                clutter.push(c);
+                (f, p, b)
+            }
+        };
         summary.frames += f;
         summary.points += p;
         summary.boxes += b;
+    }
+    if cfg.world == World::V2 {
+        super::world_v2::write_rigs(out, &names, cfg.seed, &clutter)?;
     }
     Ok(summary)
 }
@@ -184,7 +235,7 @@ fn synth_sequence(layout: &Layout, seq: &str, index: u64, cfg: &SynthConfig, cal
     let seq_seed = mix(cfg.seed, index);
     let mut rng = ChaCha8Rng::seed_from_u64(seq_seed);
     let mut scene = Scene::generate(SceneKind::for_sequence(seq), cfg.max_people, &mut rng);
-    let lidar = Vlp16::default();
+    let lidar = Scanner::default();
     let dt = 1.0 / cfg.fps;
     let t0 = 1_550_000_000.0 + index as f64 * 10_000.0;
     let mut labels = BTreeMap::new();

@@ -1,7 +1,9 @@
-//! `bench-v1` cannot drift: every figure in the README and `weights/README.md` was measured on it,
-//! so a simulator change that alters its frames must come as a new preset (docs/simulated-benchmark.md).
-//! The first eight sequences of the preset at seed 0 (halls, plazas and corridors, training and
-//! validation), two frames each, are generated and reduced to a digest of their points (to the millimetre), boxes (to a
+//! The simulated benchmarks cannot drift: every figure in the README and `weights/README.md` was
+//! measured on them and the shipped weights trained on them, so a simulator change that alters
+//! their frames must come as a new preset (docs/simulated-benchmark.md). The first sequences of
+//! each preset at seed 0 (bench-v1: eight, its halls, plazas and corridors; bench-v2: seven, one
+//! of each place in turn, with their sensors and platforms), training and validation, two frames
+//! each, are generated and reduced to a digest of their points (to the millimetre), boxes (to a
 //! tenth of a millimetre) and counts. Generating fewer sequences or frames than the preset does not
 //! change the ones made: each sequence draws from its own seed, and a frame from those before it
 //! (the slice's PCD files equal the full preset's byte for byte). Fewer sequences miss changes:
@@ -25,10 +27,10 @@ impl Fnv {
     }
 }
 
-#[test]
-fn bench_v1_frames_have_their_pinned_digest() {
+/// Frames, points, boxes and the digest of the first `sequences` of `preset` at seed 0.
+fn digest(preset: Preset, sequences: usize) -> (usize, usize, usize, String) {
     let dir = tempfile::tempdir().unwrap();
-    let cfg = SynthConfig { sequences: 8, frames: 2, ..Preset::BenchV1.synth(0) };
+    let cfg = SynthConfig { sequences, frames: 2, ..preset.synth(0) };
     synth(dir.path(), &cfg).unwrap();
     let ds = JrdbDataset::open(dir.path(), &DatasetConfig { split: Split::TrainVal, require_labels: false, ..Default::default() }).unwrap();
     let mut h = Fnv(0xcbf2_9ce4_8422_2325);
@@ -53,10 +55,23 @@ fn bench_v1_frames_have_their_pinned_digest() {
         points += f.points.len();
         boxes += f.boxes.len();
     }
-    let got = (ds.len(), points, boxes, format!("{:016x}", h.0));
-    let pinned = (16, 835_908, 212, "9f4a32b0cda3d405".to_string());
+    (ds.len(), points, boxes, format!("{:016x}", h.0))
+}
+
+#[test]
+fn bench_v1_frames_have_their_pinned_digest() {
     assert_eq!(
-        got, pinned,
+        digest(Preset::BenchV1, 8),
+        (16, 835_908, 212, "9f4a32b0cda3d405".to_string()),
         "bench-v1 changed: every published figure was measured on the old frames. If the simulator must change, add a new preset (docs/simulated-benchmark.md) and leave bench-v1's frames as they are."
+    );
+}
+
+#[test]
+fn bench_v2_frames_have_their_pinned_digest() {
+    assert_eq!(
+        digest(Preset::BenchV2, 7),
+        (14, 715_179, 282, "87628024b635c473".to_string()),
+        "bench-v2 changed: the shipped weights were trained on it and its figures measured on it. If the simulator must change, add a new preset (docs/simulated-benchmark.md) and leave bench-v2's frames as they are."
     );
 }
