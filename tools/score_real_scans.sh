@@ -7,9 +7,12 @@
 #
 #   bash tools/score_real_scans.sh [OUT] [detect options, e.g. --run DIR]
 #
-# Each source's sensor pose in the base frame is given below (measured heights); FRAME=auto finds
-# the height and tilt from each scan's ground instead, keeping only the axes' turn (nuScenes' y
-# points forward) and Argoverse's offset from the rear axle to the LiDAR.
+# FRAME picks how each cloud is placed in the base frame:
+#   default  detect's defaults: the height and tilt found from each scan's ground (`--transform
+#            auto`), nothing told about the sources (what a new user gets);
+#   auto     the same, told only what the ground cannot say: nuScenes' y axis points forward and
+#            Argoverse's vehicle frame has its origin 1.35 m behind the LiDAR;
+#   given    each sensor's measured pose written below.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=${1:-target/real-scans}
@@ -19,9 +22,12 @@ declare -A pose=(
     [nuscenes]="yaw=-90,z=1.14"        # HDL-32E 1.84 m up, x right and y forward
     [argoverse2]="x=-1.35,z=-0.33"     # the vehicle frame: rear axle, road at z = -0.37, LiDAR 1.35 m ahead
 )
-if [ "${FRAME:-given}" = auto ]; then
-    pose=([sustechpoints]="auto" [nuscenes]="auto,yaw=-90" [argoverse2]="auto,x=-1.35")
-fi
+case "${FRAME:-default}" in
+    default) pose=([sustechpoints]="auto" [nuscenes]="auto" [argoverse2]="auto") ;;
+    auto) pose=([sustechpoints]="auto" [nuscenes]="auto,yaw=-90" [argoverse2]="auto,x=-1.35") ;;
+    given) ;;
+    *) echo "FRAME must be default, auto or given" >&2; exit 2 ;;
+esac
 rm -rf "$out"
 for source in sustechpoints nuscenes argoverse2; do
     cargo run -q -p train -- detect "real-scans/$source" --transform "${pose[$source]}" --score-threshold 0 --out "$out/$source" "$@" >/dev/null

@@ -1,5 +1,6 @@
-//! The ground under a sensor, found in its own scan: a robust plane fit (RANSAC, then least
-//! squares on the inliers) over the returns around and below it. What `detect` needs to move a
+//! The ground under a sensor, found in its own scan: a robust plane fit (RANSAC scoring a plane
+//! by the returns on it less those below it, then least squares on the inliers) over the returns
+//! around and below it. What `detect` needs to move a
 //! user's cloud into the frame the models learned (the floor level and a known distance below
 //! the origin) without being told the sensor's height and tilt.
 
@@ -29,7 +30,7 @@ pub struct GroundSearch {
 
 impl Default for GroundSearch {
     fn default() -> Self {
-        Self { range: [2.0, 30.0], below: 0.2, tolerance: 0.08, max_tilt_deg: 20.0, min_inliers: 300, min_share: 0.15, iterations: 256 }
+        Self { range: [2.0, 30.0], below: 0.2, tolerance: 0.08, max_tilt_deg: 20.0, min_inliers: 300, min_share: 0.05, iterations: 1024 }
     }
 }
 
@@ -106,7 +107,9 @@ pub fn fit_ground(points: &[[f32; 3]], s: &GroundSearch) -> Result<GroundPlane, 
     let min_nz = (s.max_tilt_deg as f64).to_radians().cos();
     let tol = s.tolerance as f64;
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0x67_72_6f_75_6e_64);
-    let mut best: Option<([f64; 3], f64, usize)> = None;
+    let mut best: Option<([f64; 3], f64, i64)> = None;
+    // Hypotheses are scored on at most ~8,000 of the candidates (every `stride`-th), refined on all.
+    let stride = n.div_ceil(8000).max(1);
     for _ in 0..s.iterations {
         let [a, b, c] = [0, 1, 2].map(|_| candidates[rng.random_range(0..n)]);
         let (u, v) = (sub(b, a), sub(c, a));
@@ -123,9 +126,21 @@ pub fn fit_ground(points: &[[f32; 3]], s: &GroundSearch) -> Result<GroundPlane, 
             continue;
         }
         let d = -dot(normal, a);
-        let inliers = candidates.iter().filter(|p| (dot(normal, **p) + d).abs() <= tol).count();
-        if best.is_none_or(|b| inliers > b.2) {
-            best = Some((normal, d, inliers));
+        // The ground is the lowest surface: returns below a plane count against it. A level band
+        // through walls and vehicles can hold more returns than a road split by kerbs, but has
+        // the road below it; of a road and a sidewalk beside it, the road wins.
+        let (mut on, mut below) = (0usize, 0usize);
+        for p in candidates.iter().step_by(stride) {
+            let e = dot(normal, *p) + d;
+            if e.abs() <= tol {
+                on += 1;
+            } else if e < -tol {
+                below += 1;
+            }
+        }
+        let score = on as i64 - below as i64;
+        if best.is_none_or(|b| score > b.2) {
+            best = Some((normal, d, score));
         }
     }
     let Some((normal, d, _)) = best else { return Err(NoGround::NoPlane { best_inliers: 0, candidates: n }) };

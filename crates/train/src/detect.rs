@@ -114,6 +114,14 @@ pub fn find_people(detector: &RunDetector, points: &[[f32; 3]], pose: &SensorPos
     Found { base_points, base, input, dropped_out_of_volume }
 }
 
+/// Places `points` (in the sensor's own frame) as `frame` says, by default from the ground in
+/// them, then [`find_people`]: the library's way to detect in a cloud straight from a driver.
+pub fn find_people_placed(detector: &RunDetector, points: &[[f32; 3]], frame: &FrameSpec, score_threshold: f64) -> (Placement, Found) {
+    let placement = frame.place(points);
+    let found = find_people(detector, points, &placement.pose, score_threshold);
+    (placement, found)
+}
+
 /// What a caught panic said, for a message naming the input it happened on.
 pub fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
     payload

@@ -65,7 +65,7 @@ pub use backend::BackendKind;
 pub use calibrate::{CalibrateOptions, RadialBias, calibrate};
 pub use checkpoint::{Checkpoints, Slot, TrainState};
 pub use config::RunConfig;
-pub use detect::{BoxRecord, DetectOptions, FrameReport};
+pub use detect::{BoxRecord, DetectOptions, FrameReport, Found, find_people, find_people_placed};
 pub use detector::RunDetector;
 pub use facing::{FacingOptions, FacingReport, FitBoxes, fit_facing};
 pub use infer::{InferOptions, InferOutput, infer};

@@ -280,14 +280,14 @@ struct ModelArgs {
     /// validation frames; 0 keeps every box the run's post-processing keeps, as `infer` scores).
     #[arg(long, default_value_t = 0.5)]
     score_threshold: f64,
-    /// Your sensor frame's pose in JRDB's base frame (x forward, y left, z up, metres, the floor
-    /// at z = -0.7): `z=0.5,yaw=90` maps a point p to R(yaw)·p + (x, y, z); keys x, y, z in
-    /// metres, yaw (and roll, pitch) in degrees. A sensor frame with x forward, z up and its
-    /// origin H m above the floor needs `z=H-0.7`. `auto` finds the height and tilt from the
-    /// ground in each scan (`auto,yaw=-90` for a sensor whose y points forward); a scan without
-    /// ground in view keeps the pose given, and its report says so. Not applied to JRDB-format
-    /// trees (their calibration is).
-    #[arg(long, value_name = "auto|x=…,y=…,z=…,yaw=…", default_value = "")]
+    /// Where your sensor frame sits in JRDB's base frame (x forward, y left, z up, metres, the
+    /// floor at z = -0.7). `auto` (the default) finds the height and tilt from the ground in each
+    /// scan (`auto,yaw=-90` for a sensor whose y points forward); a scan without ground in view
+    /// keeps the pose given beside `auto` (the identity: the base frame) and its report says so.
+    /// A pose given whole skips the search: `z=0.5,yaw=90` maps a point p to R(yaw)·p + (x, y,
+    /// z); keys x, y, z in metres, yaw (and roll, pitch) in degrees; `identity` for a cloud in
+    /// the base frame already. Not applied to JRDB-format trees (their calibration is).
+    #[arg(long, value_name = "auto|identity|x=…,y=…,z=…,yaw=…", default_value = "auto")]
     transform: FrameSpec,
 }
 

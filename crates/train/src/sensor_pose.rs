@@ -121,15 +121,32 @@ impl fmt::Display for SensorPose {
     }
 }
 
-/// How `detect` and `serve` place a cloud in the base frame: a given pose, or the ground found in
-/// the scan itself (`auto`: the sensor's height and tilt from a plane fit, the floor then put where
-/// the models learned it), with any yaw, x and y given beside it.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
+/// How `detect` and `serve` place a cloud in the base frame: the ground found in the scan itself
+/// (`auto`, the default: the sensor's height and tilt from a plane fit, the floor then put where
+/// the models learned it), with any yaw, x and y given beside it, or a pose given whole.
+///
+/// A scan without ground in view keeps the pose given beside `auto` (by default the identity:
+/// the cloud is taken to be in the base frame already) and its placement says so.
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FrameSpec {
     /// The pose given (with `auto`, its yaw, x and y; its z, roll and pitch come from the ground).
     pub pose: SensorPose,
     /// Find the ground in each scan.
     pub auto: bool,
+}
+
+impl Default for FrameSpec {
+    /// `auto`: find the ground.
+    fn default() -> Self {
+        Self { pose: SensorPose::default(), auto: true }
+    }
+}
+
+impl FrameSpec {
+    /// A pose given whole, no ground search.
+    pub fn given(pose: SensorPose) -> Self {
+        Self { pose, auto: false }
+    }
 }
 
 /// How a scan was placed, for its report.
@@ -166,7 +183,8 @@ impl FrameSpec {
     }
 }
 
-/// `auto`, `auto,yaw=-90`, or a pose (see [`SensorPose`]'s keys).
+/// `auto`, `auto,yaw=-90`, or a pose (see [`SensorPose`]'s keys; `identity` or an empty string
+/// for the base frame itself).
 impl FromStr for FrameSpec {
     type Err = String;
 
@@ -180,6 +198,7 @@ impl FromStr for FrameSpec {
                 !is_auto
             })
             .collect();
+        let rest: Vec<&str> = rest.into_iter().filter(|p| p.trim() != "identity").collect();
         let pose: SensorPose = rest.join(",").parse()?;
         if auto && (pose.translation[2] != 0.0 || pose.roll != 0.0 || pose.pitch != 0.0) {
             return Err("`auto` finds z, roll and pitch from the ground; give only yaw, x or y beside it".into());

@@ -136,7 +136,8 @@ fn detect_gives_infers_boxes_in_every_input_format() {
     write("n3_f64.npy", npy(points, 3, true));
     write("notes.txt", b"not a cloud".to_vec());
     let files_out = tmp.path().join("files-out");
-    ok(&["detect", files.to_str().unwrap(), "--run", w, "--score-threshold", "0", "--out", files_out.to_str().unwrap()]);
+    // In the base frame already (`identity`): the boxes are the tree's exactly.
+    ok(&["detect", files.to_str().unwrap(), "--run", w, "--score-threshold", "0", "--transform", "identity", "--out", files_out.to_str().unwrap()]);
     let want = report(&tree_out.join("json").join(seq).join(format!("{}.json", frames[0].name)));
     let nans = points.len().div_ceil(1000);
     for (name, format, dropped) in [
@@ -173,7 +174,7 @@ fn detect_gives_infers_boxes_in_every_input_format() {
 
     // The default threshold keeps a subset, best first.
     let default_out = tmp.path().join("default-out");
-    ok(&["detect", files.join("velodyne.bin").to_str().unwrap(), "--run", w, "--out", default_out.to_str().unwrap()]);
+    ok(&["detect", files.join("velodyne.bin").to_str().unwrap(), "--run", w, "--transform", "identity", "--out", default_out.to_str().unwrap()]);
     let kept = report(&default_out.join("json").join("velodyne.json"));
     assert_eq!(kept.score_threshold, 0.5);
     let expected: Vec<BoxRecord> = want.detections.iter().filter(|b| b.score >= 0.5).copied().collect();
@@ -508,7 +509,10 @@ fn auto_finds_a_raised_tilted_sensor_and_reports_it() {
     let file = tmp.path().join("raised.bin");
     ok(&["detect", file.to_str().unwrap(), "--run", w.to_str().unwrap(), "--transform", "z=0.5,pitch=3", "--out", given.to_str().unwrap()]);
     ok(&["detect", file.to_str().unwrap(), "--run", w.to_str().unwrap(), "--transform", "auto", "--out", auto.to_str().unwrap()]);
+    let by_default = tmp.path().join("default");
+    ok(&["detect", file.to_str().unwrap(), "--run", w.to_str().unwrap(), "--out", by_default.to_str().unwrap()]);
     let (g, a) = (report(&given.join("json/raised.json")), report(&auto.join("json/raised.json")));
+    assert_eq!(report(&by_default.join("json/raised.json")), a, "finding the frame is the default");
     assert_eq!(g.frame, "given");
     assert!(a.frame.starts_with("ground: 1.20 m below the sensor, tilted 3.0°"), "{}", a.frame);
     // The same people, within a few centimetres (the fitted plane is not the exact one).
