@@ -48,6 +48,22 @@ pub struct DataConfig {
     pub on_bad_frame: OnBadFrame,
     /// Prepare the next training batch on a second thread.
     pub prefetch: bool,
+    /// More trees whose training split is trained on beside `root`'s (`[[data.also_train]]`),
+    /// each generated on first use from its own `simulate`; validation stays on `root`.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub also_train: Vec<ExtraTree>,
+}
+
+/// A tree trained on beside `data.root`: its training split (the same `val_sequences` left
+/// out) is appended to the root's.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ExtraTree {
+    /// The tree (as `data.root`).
+    pub root: PathBuf,
+    /// Generated there first when `root` does not exist (as `data.simulate`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub simulate: Option<SimulateConfig>,
 }
 
 impl Default for DataConfig {
@@ -65,6 +81,7 @@ impl Default for DataConfig {
             augment: AugmentSection::default(),
             on_bad_frame: OnBadFrame::Fail,
             prefetch: true,
+            also_train: Vec::new(),
         }
     }
 }

@@ -107,6 +107,17 @@ fn warn(e: &DataError) {
 }
 
 impl JrdbDataset {
+    /// Appends another tree's frames (trained on together); both must share one calibration,
+    /// which merges every frame's two clouds.
+    pub fn append(&mut self, other: JrdbDataset) -> Result<()> {
+        if other.calibration != self.calibration {
+            return Err(DataError::new(&other.layout.calibration_file(), ErrorKind::Mismatch(format!("calibration differs from {}'s; trees trained on together must share one", self.layout.root.display()))));
+        }
+        self.frames.extend(other.frames);
+        self.sequences.extend(other.sequences);
+        Ok(())
+    }
+
     /// Opens a tree (a plain root or one holding `train_dataset_with_activity/`) and lists its frames.
     pub fn open(dir: &Path, cfg: &DatasetConfig) -> Result<Self> {
         let layout = Layout::resolve(dir)?;

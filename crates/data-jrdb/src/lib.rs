@@ -56,7 +56,7 @@ pub use batch::{Batch, Sample, SampleConfig, collate, prepare};
 pub use box3d::Box3d;
 pub use calibration::{Calibration, Lidar};
 pub use cloud::{Cloud, CloudFormat, FORMATS, FormatInfo, ReadLimits, encode_npy, parse_cloud, parse_cloud_within, read_cloud};
-pub use config::{AugmentSection, DataConfig};
+pub use config::{AugmentSection, DataConfig, ExtraTree};
 pub use dataset::{DatasetConfig, Frame, JrdbDataset, OnBadFrame};
 pub use error::{DataError, ErrorKind, Result};
 pub use labels::Label;

@@ -1,27 +1,33 @@
 //! The run's data: the simulated tree generated on first use, the two splits, and their loaders.
 
+use std::path::Path;
 use std::sync::Arc;
 
 use anyhow::{Context, Result, bail};
-use data_jrdb::sim::{SynthSummary, synth};
+use data_jrdb::sim::{SimulateConfig, SynthSummary, synth};
 use data_jrdb::{DataConfig, JrdbDataset, Loader, LoaderConfig, Split};
 
 use crate::config::RunConfig;
 
-/// Makes sure `data.root` exists: when it does not and the config has `[data.simulate]`, the
-/// simulated tree is generated there (into a temporary sibling folder renamed into place when
-/// complete, so an interrupted generation is redone rather than half-used). Returns what was written.
+/// Makes sure `data.root` (and every `data.also_train` root) exists: when one does not and the
+/// config has its `simulate`, the simulated tree is generated there (into a temporary sibling
+/// folder renamed into place when complete, so an interrupted generation is redone rather than
+/// half-used). Returns what was written for `data.root`.
 pub fn ensure_dataset(cfg: &DataConfig) -> Result<Option<SynthSummary>> {
-    if cfg.root.exists() {
+    for extra in &cfg.also_train {
+        ensure_tree(&extra.root, extra.simulate.as_ref(), "data.also_train")?;
+    }
+    ensure_tree(&cfg.root, cfg.simulate.as_ref(), "data")
+}
+
+fn ensure_tree(root: &Path, simulate: Option<&SimulateConfig>, section: &str) -> Result<Option<SynthSummary>> {
+    if root.exists() {
         return Ok(None);
     }
-    let Some(sim) = &cfg.simulate else {
-        bail!(
-            "data root {} does not exist (point data.root at a JRDB tree, or add a [data.simulate] section to generate a simulated one)",
-            cfg.root.display()
-        );
+    let Some(sim) = simulate else {
+        bail!("data root {} does not exist (point {section}.root at a JRDB tree, or add a simulate section to generate a simulated one)", root.display());
     };
-    let tmp = crate::run_dir::tmp_name(&cfg.root);
+    let tmp = crate::run_dir::tmp_name(root);
     if tmp.exists() {
         std::fs::remove_dir_all(&tmp)?;
     }
@@ -35,10 +41,10 @@ pub fn ensure_dataset(cfg: &DataConfig) -> Result<Option<SynthSummary>> {
         synth_cfg.sequences,
         synth_cfg.frames,
         synth_cfg.seed,
-        cfg.root.display()
+        root.display()
     );
     let summary = synth(&tmp, &synth_cfg).with_context(|| format!("simulating into {}", tmp.display()))?;
-    std::fs::rename(&tmp, &cfg.root).with_context(|| format!("renaming {} to {}", tmp.display(), cfg.root.display()))?;
+    std::fs::rename(&tmp, root).with_context(|| format!("renaming {} to {}", tmp.display(), root.display()))?;
     Ok(Some(summary))
 }
 
@@ -57,9 +63,17 @@ pub fn open_split(cfg: &DataConfig, split: Split, stride: usize) -> Result<Arc<J
 
 /// The training loader: shuffled by `seed`, augmented, capped.
 pub fn train_loader(cfg: &RunConfig) -> Result<Loader> {
-    let ds = open_split(&cfg.data, cfg.data.train_split, 1)?;
+    let mut ds = Arc::into_inner(open_split(&cfg.data, cfg.data.train_split, 1)?).expect("a fresh dataset has one owner");
+    for extra in &cfg.data.also_train {
+        let dcfg = cfg.data.dataset(cfg.data.train_split);
+        let more = JrdbDataset::open(&extra.root, &dcfg).with_context(|| format!("opening {:?} split of {} (data.also_train)", cfg.data.train_split, extra.root.display()))?;
+        if more.is_empty() {
+            bail!("the {:?} split of {} (data.also_train) has no frames", cfg.data.train_split, extra.root.display());
+        }
+        ds.append(more).context("data.also_train")?;
+    }
     Ok(Loader::new(
-        ds,
+        Arc::new(ds),
         LoaderConfig {
             batch_size: cfg.train.batch_size,
             shuffle: true,
