@@ -9,15 +9,20 @@ use data_jrdb::{DataConfig, JrdbDataset, Loader, LoaderConfig, Split};
 
 use crate::config::RunConfig;
 
-/// Makes sure `data.root` (and every `data.also_train` root) exists: when one does not and the
-/// config has its `simulate`, the simulated tree is generated there (into a temporary sibling
-/// folder renamed into place when complete, so an interrupted generation is redone rather than
-/// half-used). Returns what was written for `data.root`.
+/// Makes sure `data.root` exists: when it does not and the config has `[data.simulate]`, the
+/// simulated tree is generated there (into a temporary sibling folder renamed into place when
+/// complete, so an interrupted generation is redone rather than half-used). Returns what was
+/// written.
 pub fn ensure_dataset(cfg: &DataConfig) -> Result<Option<SynthSummary>> {
+    ensure_tree(&cfg.root, cfg.simulate.as_ref(), "data")
+}
+
+/// [`ensure_dataset`], and every `data.also_train` tree beside it: what training reads.
+pub fn ensure_training_data(cfg: &DataConfig) -> Result<Option<SynthSummary>> {
     for extra in &cfg.also_train {
         ensure_tree(&extra.root, extra.simulate.as_ref(), "data.also_train")?;
     }
-    ensure_tree(&cfg.root, cfg.simulate.as_ref(), "data")
+    ensure_dataset(cfg)
 }
 
 fn ensure_tree(root: &Path, simulate: Option<&SimulateConfig>, section: &str) -> Result<Option<SynthSummary>> {

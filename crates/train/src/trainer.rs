@@ -23,7 +23,7 @@ use sparse_conv::FusedAdamConfig;
 use crate::backend::init_threads;
 use crate::checkpoint::{Checkpoints, Slot, TrainState};
 use crate::config::{OptimizerConfig, RunConfig};
-use crate::data::{ensure_dataset, eval_loader, train_loader};
+use crate::data::{ensure_training_data, eval_loader, train_loader};
 use crate::metrics::{CsvLog, epoch_header, field, step_header, truncate_after};
 use crate::run_dir::{RunDir, write_atomic};
 use crate::validate::{HeadingError, format_by_range, validate};
@@ -163,7 +163,7 @@ struct Session<'a> {
 impl<'a> Session<'a> {
     /// The data (generated on first use) and its loaders, a fresh position.
     fn set_up(cfg: &'a RunConfig, run: &'a RunDir, opts: &'a TrainOptions) -> Result<Self> {
-        ensure_dataset(&cfg.data)?;
+        ensure_training_data(&cfg.data)?;
         let loader = train_loader(cfg)?;
         let val_loader = eval_loader(cfg, cfg.data.val_split)?;
         let n = loader.batches_per_epoch();

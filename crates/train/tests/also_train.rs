@@ -3,7 +3,7 @@
 //! with different calibrations are refused, naming the file.
 
 use train::RunConfig;
-use train::data::{ensure_dataset, eval_loader, train_loader};
+use train::data::{ensure_dataset, ensure_training_data, eval_loader, train_loader};
 
 #[test]
 fn a_second_tree_adds_its_training_frames_and_nothing_to_validation() {
@@ -33,8 +33,11 @@ naming = "places"
         b.display()
     );
     let cfg = RunConfig::from_toml_str(&text).unwrap();
+    // What infer needs is the root alone; training generates the other tree too.
     ensure_dataset(&cfg.data).unwrap();
-    assert!(a.exists() && b.exists(), "both trees are generated on first use");
+    assert!(a.exists() && !b.exists());
+    ensure_training_data(&cfg.data).unwrap();
+    assert!(b.exists(), "both trees are generated before training");
     // a: 4 sequences, the second a validation one: 3 × 2 training frames. b: 5, one validation
     // (the second): 4 × 3.
     let train = train_loader(&cfg).unwrap();
