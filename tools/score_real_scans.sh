@@ -35,3 +35,30 @@ for source in sustechpoints nuscenes argoverse2; do
     cp "$out/$source"/kitti/*.txt "$out/det/$source/"
 done
 cargo run -q -p eval -- --gt real-scans/gt --det "$out/det" --min-points 5 --centre-radius 0.5 --at-score 0.5
+# The same bird's-eye-centre figures per source.
+for source in sustechpoints nuscenes argoverse2; do
+    mkdir -p "$out/one/$source/gt" "$out/one/$source/det"
+    cp -r "real-scans/gt/$source" "$out/one/$source/gt/"
+    cp -r "$out/det/$source" "$out/one/$source/det/"
+    line=$(cargo run -q -p eval -- --gt "$out/one/$source/gt" --det "$out/one/$source/det" --min-points 5 --centre-radius 0.5 --at-score 0.5 | tail -1)
+    echo "$source: ${line#*metric): }"
+done
+# Boxes on the platform: detections at the default threshold whose centre lies within the car
+# carrying the sensor (all three sources are cars), taken as 2.6 m ahead and behind the LiDAR and
+# 1.1 m to either side (Argoverse's clouds are in the vehicle frame, the LiDAR 1.35 m ahead of
+# its origin; nuScenes' y axis points forward).
+python3 - "$out" <<'PY'
+import glob, json, math, sys
+lidar = {"sustechpoints": (0.0, 0.0, 0.0), "nuscenes": (0.0, 0.0, math.pi / 2), "argoverse2": (1.35, 0.0, 0.0)}
+on = []
+for source, (lx, ly, fwd) in lidar.items():
+    for f in sorted(glob.glob(f"{sys.argv[1]}/{source}/json/*.json")):
+        for d in json.load(open(f))["detections"]:
+            if d["score"] < 0.5:
+                continue
+            dx, dy = d["x"] - lx, d["y"] - ly
+            along, across = dx * math.cos(fwd) + dy * math.sin(fwd), -dx * math.sin(fwd) + dy * math.cos(fwd)
+            if abs(along) <= 2.6 and abs(across) <= 1.1:
+                on.append(f"{source}/{f.rsplit('/', 1)[1]} ({d['x']:.1f}, {d['y']:.1f}) score {d['score']:.2f}")
+print(f"boxes on the platform at score >= 0.5: {len(on)}" + "".join(f"\n  {o}" for o in on))
+PY

@@ -111,7 +111,7 @@ impl JrdbDataset {
     /// which merges every frame's two clouds.
     pub fn append(&mut self, other: JrdbDataset) -> Result<()> {
         if other.calibration != self.calibration {
-            return Err(DataError::new(&other.layout.calibration_file(), ErrorKind::Mismatch(format!("calibration differs from {}'s; trees trained on together must share one", self.layout.root.display()))));
+            return Err(DataError::new(other.layout.calibration_file(), ErrorKind::Mismatch(format!("calibration differs from {}'s; trees trained on together must share one", self.layout.root.display()))));
         }
         self.frames.extend(other.frames);
         self.sequences.extend(other.sequences);

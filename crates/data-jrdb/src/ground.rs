@@ -106,7 +106,7 @@ pub fn fit_ground(points: &[[f32; 3]], s: &GroundSearch) -> Result<GroundPlane, 
     }
     let min_nz = (s.max_tilt_deg as f64).to_radians().cos();
     let tol = s.tolerance as f64;
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0x67_72_6f_75_6e_64);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0x6772_6f75_6e64);
     let mut best: Option<([f64; 3], f64, i64)> = None;
     // Hypotheses are scored on at most ~8,000 of the candidates (every `stride`-th), refined on all.
     let stride = n.div_ceil(8000).max(1);
