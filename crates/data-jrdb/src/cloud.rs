@@ -1,6 +1,7 @@
 //! Point clouds as other tools write them, read into `[x, y, z]` points: PCD (any of its three
-//! encodings, extra fields skipped), KITTI's velodyne `.bin` (float32 x, y, z, intensity) and
-//! NumPy `.npy` (N×3 or N×4, float32 or float64, little-endian). Points with a non-finite coordinate are dropped
+//! encodings, extra fields skipped), KITTI's velodyne `.bin` (float32 x, y, z, intensity),
+//! nuScenes' LIDAR_TOP `.pcd.bin` (float32 x, y, z, intensity, ring) and NumPy `.npy` (N×3 or
+//! N×4, float32 or float64, little-endian). Points with a non-finite coordinate are dropped
 //! and counted. The format comes from the bytes where they carry a signature (PCD's header,
 //! NPY's magic), else from the file's extension.
 
@@ -16,6 +17,9 @@ pub enum CloudFormat {
     Pcd,
     /// KITTI velodyne: little-endian float32 records of x, y, z, intensity.
     KittiBin,
+    /// nuScenes LIDAR_TOP (and Lyft level 5): little-endian float32 records of x, y, z,
+    /// intensity, ring index, in files named `*.pcd.bin`.
+    NuScenesBin,
     /// NumPy `.npy`: a 2-D float32 or float64 array of 3 or 4 columns.
     Npy,
 }
@@ -41,7 +45,7 @@ pub struct FormatInfo {
 }
 
 /// Every format read, in the order messages list them.
-pub const FORMATS: [FormatInfo; 3] = [
+pub const FORMATS: [FormatInfo; 4] = [
     FormatInfo {
         format: CloudFormat::Pcd,
         name: "pcd",
@@ -58,6 +62,15 @@ pub const FORMATS: [FormatInfo; 3] = [
         title: "KITTI .bin",
         extensions: &["bin"],
         media_types: &["application/x-kitti-bin"],
+        signature: None,
+    },
+    FormatInfo {
+        format: CloudFormat::NuScenesBin,
+        name: "nuscenes",
+        aliases: &["pcd.bin"],
+        title: "nuScenes .pcd.bin",
+        extensions: &["pcd.bin"],
+        media_types: &["application/x-nuscenes-bin"],
         signature: None,
     },
     FormatInfo {
@@ -92,7 +105,7 @@ impl FormatInfo {
         or_list(FORMATS.iter().flat_map(|f| f.extensions.iter().map(|e| format!(".{e}"))))
     }
 
-    /// The names `?format=` takes: `pcd|bin|npy`.
+    /// The names `?format=` takes: `pcd|bin|nuscenes|npy`.
     pub fn names() -> String {
         FORMATS.iter().map(|f| f.name).collect::<Vec<_>>().join("|")
     }
@@ -114,10 +127,16 @@ impl CloudFormat {
         FORMATS.iter().find(|f| f.format == self).expect("every format has a row")
     }
 
-    /// The format a file's name says (`.pcd`, `.bin`, `.npy`, any case).
+    /// The format a file's name says (`.pcd`, `.bin`, `.pcd.bin`, `.npy`, any case; the longest
+    /// matching ending wins, so `x.pcd.bin` is nuScenes', `x.bin` KITTI's).
     pub fn from_extension(path: &Path) -> Option<Self> {
-        let ext = path.extension()?.to_str()?.to_ascii_lowercase();
-        FORMATS.iter().find(|f| f.extensions.contains(&ext.as_str())).map(|f| f.format)
+        let name = path.file_name()?.to_str()?.to_ascii_lowercase();
+        FORMATS
+            .iter()
+            .flat_map(|f| f.extensions.iter().map(move |e| (f.format, *e)))
+            .filter(|(_, e)| name.len() > e.len() + 1 && name.ends_with(e) && name.as_bytes()[name.len() - e.len() - 1] == b'.')
+            .max_by_key(|(_, e)| e.len())
+            .map(|(f, _)| f)
     }
 
     /// The format a short name or alias says (`pcd`, `bin`, `kitti`, `npy`, any case).
@@ -218,25 +237,27 @@ pub fn parse_cloud_within(bytes: &[u8], format: CloudFormat, limits: &ReadLimits
             let pcd = parse_pcd_within(bytes, NonFinite::Drop, limits, false)?;
             (pcd.dropped_non_finite, pcd.xyz)
         }
-        CloudFormat::KittiBin => finite(kitti_bin(bytes, limits)?),
+        CloudFormat::KittiBin => finite(float_records(bytes, 4, "a KITTI .bin", limits)?),
+        CloudFormat::NuScenesBin => finite(float_records(bytes, 5, "a nuScenes .pcd.bin", limits)?),
         CloudFormat::Npy => finite(npy(bytes, limits)?),
     };
     Ok(Cloud { points, dropped_non_finite, format })
 }
 
-fn kitti_bin(bytes: &[u8], limits: &ReadLimits) -> std::result::Result<Vec<[f32; 3]>, ErrorKind> {
-    const RECORD: usize = 16;
-    if bytes.len() % RECORD != 0 {
+/// Little-endian float32 records of `fields` values, x, y, z first (KITTI's 4, nuScenes' 5).
+fn float_records(bytes: &[u8], fields: usize, what: &str, limits: &ReadLimits) -> std::result::Result<Vec<[f32; 3]>, ErrorKind> {
+    let record = 4 * fields;
+    if bytes.len() % record != 0 {
         return Err(ErrorKind::Mismatch(format!(
-            "a KITTI .bin holds records of 4 float32 (16 bytes); {} bytes is {} records and {} bytes over",
+            "{what} holds records of {fields} float32 ({record} bytes); {} bytes is {} records and {} bytes over",
             bytes.len(),
-            bytes.len() / RECORD,
-            bytes.len() % RECORD
+            bytes.len() / record,
+            bytes.len() % record
         )));
     }
-    limits.check_points(bytes.len() / RECORD)?;
+    limits.check_points(bytes.len() / record)?;
     let f = |b: &[u8]| f32::from_le_bytes([b[0], b[1], b[2], b[3]]);
-    Ok(bytes.chunks_exact(RECORD).map(|r| [f(&r[0..4]), f(&r[4..8]), f(&r[8..12])]).collect())
+    Ok(bytes.chunks_exact(record).map(|r| [f(&r[0..4]), f(&r[4..8]), f(&r[8..12])]).collect())
 }
 
 /// NumPy's `.npy` (format versions 1–3): the magic, a header length, a Python-literal header
@@ -318,9 +339,11 @@ mod tests {
         let bin: Vec<u8> = pts.iter().flat_map(|p| p.iter().chain(&[0.5f32]).flat_map(|v| v.to_le_bytes())).collect();
         let f4: Vec<u8> = pts.iter().flat_map(|p| p.iter().flat_map(|v| v.to_le_bytes())).collect();
         let f8x4: Vec<u8> = pts.iter().flat_map(|p| p.iter().chain(&[9.0]).flat_map(|&v| (v as f64).to_le_bytes())).collect();
+        let nus: Vec<u8> = pts.iter().flat_map(|p| p.iter().chain(&[0.5f32, 17.0]).flat_map(|v| v.to_le_bytes())).collect();
         let want = vec![pts[0], pts[1]];
         for (bytes, format) in [
             (bin, CloudFormat::KittiBin),
+            (nus, CloudFormat::NuScenesBin),
             (encode_npy("<f4", "(3, 3)", &f4), CloudFormat::Npy),
             (encode_npy("<f8", "(3, 4)", &f8x4), CloudFormat::Npy),
         ] {
@@ -336,10 +359,15 @@ mod tests {
         assert_eq!(CloudFormat::sniff(b"VERSION 0.7\nFIELDS x y z\n"), Some(CloudFormat::Pcd));
         assert_eq!(CloudFormat::sniff(&[0u8; 32]), None);
         assert_eq!(CloudFormat::from_extension(Path::new("a/000001.BIN")), Some(CloudFormat::KittiBin));
+        let nus = "n008-2018-08-01-15-16-36-0400__LIDAR_TOP__1533151603547590.pcd.bin";
+        assert_eq!(CloudFormat::from_extension(Path::new(nus)), Some(CloudFormat::NuScenesBin));
+        assert_eq!(CloudFormat::from_extension(Path::new("x.PCD.BIN")), Some(CloudFormat::NuScenesBin));
+        assert_eq!(CloudFormat::from_extension(Path::new("pcd.bin")), Some(CloudFormat::KittiBin), "a bare name has no .pcd ending");
+        assert_eq!(CloudFormat::from_extension(Path::new("a.xpcd.bin")), Some(CloudFormat::KittiBin));
         assert_eq!(CloudFormat::from_extension(Path::new("scan.ply")), None);
         assert_eq!((CloudFormat::from_name("KITTI"), CloudFormat::from_name("ply")), (Some(CloudFormat::KittiBin), None));
         assert_eq!(CloudFormat::from_media_type("Application/X-NPY; q=1"), Some(CloudFormat::Npy));
-        assert_eq!((FormatInfo::titles().as_str(), FormatInfo::extensions().as_str()), ("PCD, KITTI .bin or .npy", ".pcd, .bin or .npy"));
+        assert_eq!((FormatInfo::titles().as_str(), FormatInfo::extensions().as_str()), ("PCD, KITTI .bin, nuScenes .pcd.bin or .npy", ".pcd, .bin, .pcd.bin or .npy"));
         assert_eq!(FormatInfo::signatures(), "a PCD header or NPY magic");
         assert!(FORMATS.iter().all(|f| f.format.info() == f));
     }
@@ -348,6 +376,10 @@ mod tests {
     fn malformed_clouds_say_what_is_wrong() {
         let e = parse_cloud(&[0u8; 20], CloudFormat::KittiBin).unwrap_err().to_string();
         assert!(e.contains("16 bytes") && e.contains("4 bytes over"), "{e}");
+        // A KITTI file named as nuScenes' (or the reverse) is refused, not misread, unless its
+        // size happens to fit both (a multiple of 80 bytes).
+        let e = parse_cloud(&[0u8; 32], CloudFormat::NuScenesBin).unwrap_err().to_string();
+        assert!(e.contains("nuScenes .pcd.bin") && e.contains("20 bytes") && e.contains("12 bytes over"), "{e}");
         let e = parse_cloud(&encode_npy("<f4", "(2, 5)", &[0u8; 40]), CloudFormat::Npy).unwrap_err().to_string();
         assert!(e.contains("got 5"), "{e}");
         let e = parse_cloud(&encode_npy("<i4", "(1, 3)", &[0u8; 12]), CloudFormat::Npy).unwrap_err().to_string();

@@ -2,7 +2,7 @@
 //! simulator that writes JRDB-format trees.
 //!
 //! Crate map:
-//! - files: [`pcd`] (+ [`lzf`]), [`cloud`] (PCD, KITTI `.bin`, `.npy` for detection), [`labels`], [`calibration`], [`timestamps`], [`split`] (layout and
+//! - files: [`pcd`] (+ [`lzf`]), [`cloud`] (PCD, KITTI `.bin`, nuScenes `.pcd.bin`, `.npy` for detection), [`labels`], [`calibration`], [`timestamps`], [`split`] (layout and
 //!   splits), [`dataset`] (`JrdbDataset`, `Frame`);
 //! - settings: [`config`] (`DataConfig`, the `[data]` table a run embeds);
 //! - batches: [`volume`] → [`augment`] → [`voxelize`] → [`batch`] (`Sample`, `Batch`), driven by [`loader`];
@@ -14,7 +14,7 @@
 pub mod augment;
 /// Frames to samples to batches.
 pub mod batch;
-/// Point clouds from files other tools write (PCD, KITTI `.bin`, NumPy `.npy`).
+/// Point clouds from files other tools write (PCD, KITTI `.bin`, nuScenes `.pcd.bin`, NumPy `.npy`).
 pub mod cloud;
 /// The workspace's box type and its convention.
 pub mod box3d;

@@ -1,4 +1,4 @@
-//! People in point clouds the user has: files (PCD, KITTI `.bin`, `.npy`), folders of them,
+//! People in point clouds the user has: files (PCD, KITTI `.bin`, nuScenes `.pcd.bin`, `.npy`), folders of them,
 //! glob patterns and JRDB-format trees, through a run's [`RunDetector`]. Per frame it writes
 //!
 //! ```text

@@ -172,7 +172,7 @@ enum Cmd {
         #[arg(long)]
         write: bool,
     },
-    /// Detect people in point-cloud files (PCD, KITTI .bin, .npy), folders of them, glob patterns
+    /// Detect people in point-cloud files (PCD, KITTI .bin, nuScenes .pcd.bin, .npy), folders of them, glob patterns
     /// or JRDB-format trees; write OUT/json/NAME.json, OUT/kitti/NAME.txt and with --render
     /// OUT/render/NAME.png per frame.
     Detect {

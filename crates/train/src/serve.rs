@@ -1,7 +1,7 @@
 //! `serve`: the detector over HTTP (axum on tokio), loaded once.
 //!
 //! ```text
-//! POST /detect[?format=pcd|bin|npy][&render=1][&score_threshold=0.5]   body: one point cloud
+//! POST /detect[?format=pcd|bin|nuscenes|npy][&render=1][&score_threshold=0.5]   body: one point cloud
 //!      → 200 application/json FrameReport (or image/png with render=1)
 //!      → 400 malformed cloud, bad query · 408 body not received in time · 413 body over
 //!        --max-body-mb or cloud over --max-points · 415 format not recognised · 503 no room or
