@@ -1,5 +1,6 @@
 //! Every config the repository ships resolves: the run configs in `experiments/`, every variant and
-//! seed of every sweep in `experiments/sweeps/`, and the shipped weights' `config.toml`. A typo in
+//! seed of every sweep in `experiments/sweeps/` and `experiments/history/`, and the shipped
+//! weights' `config.toml`. A typo in
 //! a key (the configs deny unknown fields) or a value `validate` rejects fails here, not an hour
 //! into someone's run.
 
@@ -34,8 +35,9 @@ fn every_run_config_resolves() {
 
 #[test]
 fn every_sweep_resolves_every_variant_and_seed() {
-    let files = tomls(&workspace().join("experiments/sweeps"));
-    assert!(files.len() >= 5, "sweeps found: {files:?}");
+    let mut files = tomls(&workspace().join("experiments/sweeps"));
+    files.extend(tomls(&workspace().join("experiments/history")));
+    assert!(files.len() >= 19, "sweeps found: {files:?}");
     for path in &files {
         let (sweep, base) = SweepConfig::load(path).unwrap_or_else(|e| panic!("{}: {e:#}", path.display()));
         let jobs = sweep.jobs(&base).unwrap_or_else(|e| panic!("{}: {e:#}", path.display()));
@@ -85,10 +87,10 @@ fn experiments_readme_documents_every_config_key_and_sweep_file() {
     let readme = std::fs::read_to_string(workspace().join("experiments/README.md")).unwrap();
     let missing: Vec<String> = config_keys().into_iter().filter(|k| !readme.contains(&format!("`{k}`")) && !readme.contains(&format!("`{k} ")) && !readme.contains(&format!("[{k}]")) && !readme.contains(&format!(".{k}]"))).collect();
     assert!(missing.is_empty(), "keys not documented in experiments/README.md: {missing:?}");
-    let sweeps: Vec<String> = tomls(&workspace().join("experiments/sweeps"))
+    let sweeps: Vec<String> = ["sweeps", "history"]
         .iter()
-        .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
-        .filter(|name| !readme.contains(name.as_str()))
+        .flat_map(|dir| tomls(&workspace().join("experiments").join(dir)).into_iter().map(move |p| format!("{dir}/{}", p.file_name().unwrap().to_string_lossy())))
+        .filter(|name| !readme.contains(&format!("`{name}`")))
         .collect();
     assert!(sweeps.is_empty(), "sweep files not listed in experiments/README.md: {sweeps:?}");
 }
