@@ -241,6 +241,10 @@ enum Cmd {
         /// settings (nothing is retrained; any other change is refused), then write the tables.
         #[arg(long)]
         rescore: bool,
+        /// Run this many runs at once on this machine, each its own process with the cores
+        /// split between them (threads per run = cores / N; the results are the same).
+        #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..))]
+        jobs: u16,
     },
 }
 
@@ -480,7 +484,7 @@ fn main() -> ExitCode {
             };
             train::serve::serve(&opts)
         })(),
-        Some(Cmd::Sweep { file, backend, max_steps, max_epochs, variants, dry_run, rescore }) => (|| -> Result<()> {
+        Some(Cmd::Sweep { file, backend, max_steps, max_epochs, variants, dry_run, rescore, jobs: parallel }) => (|| -> Result<()> {
             let (sweep, base) = SweepConfig::load(&file)?;
             let mut jobs = sweep.jobs(&base)?;
             if let Some(b) = backend {
@@ -497,6 +501,9 @@ fn main() -> ExitCode {
             }
             let results = if rescore {
                 train::sweep::rescore_all(&sweep, &jobs, &variants)?
+            } else if parallel > 1 {
+                let mut executor = train::sweep::Processes { jobs: parallel as usize, max_steps, max_epochs };
+                train::sweep::run_sweep_with(&sweep, &jobs, &variants, &mut executor, true)?
             } else {
                 train::sweep::run_sweep_with(&sweep, &jobs, &variants, &mut train::sweep::training(max_steps, max_epochs), true)?
             };

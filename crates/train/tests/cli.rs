@@ -180,3 +180,43 @@ fn sweep_rescore_scores_finished_runs_with_new_post_processing_only() {
     assert!(!out.status.success() && err.contains("not rescored") && err.contains(&run.display().to_string()), "{err}");
     assert_eq!(std::fs::read_to_string(run.join("config.toml")).unwrap(), config);
 }
+
+#[test]
+fn a_sweep_run_two_at_a_time_gives_the_local_sweeps_tables() {
+    // Two variants × one seed, once one after another in this process and once two at a time as
+    // child processes with a thread each: the same runs, bit for bit (the tables and each run's
+    // metrics, times aside).
+    let tmp = tempfile::tempdir().unwrap();
+    let data = tmp.path().join("data");
+    let cfg = tiny_config(tmp.path(), &data, "");
+    let text = std::fs::read_to_string(&cfg).unwrap().replace("[train]\n", "[train]\nepochs = 1\n");
+    std::fs::write(&cfg, text).unwrap();
+    let sweep = |name: &str| {
+        let path = tmp.path().join(format!("{name}.toml"));
+        let runs = tmp.path().join("runs");
+        std::fs::write(&path, format!("base = \"cfg.toml\"\nout_dir = \"{}\"\nseeds = [0]\n[[variants]]\nname = \"a\"\n[[variants]]\nname = \"b\"\nset = {{ \"model.cls_weight\" = 10.0 }}\n", runs.display())).unwrap();
+        path
+    };
+    let (local, parallel) = (sweep("local"), sweep("parallel"));
+    train_bin(&["sweep", local.to_str().unwrap()]);
+    let out = train_bin(&["sweep", parallel.to_str().unwrap(), "--jobs", "2"]);
+    assert!(String::from_utf8_lossy(&out.stderr).contains("1 threads"), "{}", String::from_utf8_lossy(&out.stderr));
+    let runs = tmp.path().join("runs");
+    for v in ["a", "b"] {
+        assert!(runs.join(format!("parallel/{v}/seed-0.log")).is_file(), "each run's log beside its folder");
+        let metrics = |s: &str| -> Vec<String> {
+            // Every column but the wall-clock ones.
+            std::fs::read_to_string(runs.join(format!("{s}/{v}/seed-0/metrics.csv"))).unwrap().lines().map(|l| l.rsplitn(3, ',').nth(2).unwrap().to_string()).collect()
+        };
+        assert_eq!(metrics("local"), metrics("parallel"), "variant {v}");
+    }
+    let table = |s: &str| -> Vec<String> {
+        let csv = std::fs::read_to_string(runs.join(format!("{s}/results.csv"))).unwrap();
+        let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
+        csv.lines().map(|l| l.split(',').zip(&header).filter(|(_, h)| !h.contains("seconds") && !h.contains("minutes")).map(|(c, _)| c.to_string()).collect::<Vec<_>>().join(",")).collect()
+    };
+    assert_eq!(table("local"), table("parallel"));
+    // Submitting again skips the finished runs.
+    let again = train_bin(&["sweep", parallel.to_str().unwrap(), "--jobs", "2"]);
+    assert!(String::from_utf8_lossy(&again.stderr).matches("finished before, skipped").count() == 2);
+}

@@ -1,6 +1,6 @@
 //! Running a sweep's jobs: the [`Executor`] seam, the local one, and rescoring.
 
-use anyhow::{Result, bail};
+use anyhow::{Context, Result, bail};
 
 use super::{Job, SweepConfig, SweepResults, aggregate, check_variants, finished};
 use crate::checkpoint::Slot;
@@ -94,6 +94,91 @@ pub fn training(max_steps: Option<u64>, max_epochs: Option<usize>) -> Local<impl
             let opts = TrainOptions { resume: existing == Existing::Resume, max_steps, max_epochs, verbose: true };
             train(&job.config, &run, &opts)
         },
+    }
+}
+
+/// The local executor for `--jobs N`: up to `jobs` runs at once, each a child process of this
+/// binary (`train --config <variant>/seed-<s>.toml`, its output in `<variant>/seed-<s>.log`)
+/// with the machine's cores split between them (`threads` = cores / jobs; results do not depend
+/// on the thread count). The simulated trees are generated first, one at a time, so that runs
+/// starting together do not race to write the same tree.
+pub struct Processes {
+    /// Runs at once.
+    pub jobs: usize,
+    /// Cap each run's steps (as `--max-steps`).
+    pub max_steps: Option<u64>,
+    /// Cap each run's epochs (as `--max-epochs`).
+    pub max_epochs: Option<usize>,
+}
+
+impl Processes {
+    fn spawn(&self, job: &Job, threads: usize) -> Result<std::process::Child> {
+        let variant_dir = job.dir.parent().context("a run folder has a parent")?;
+        std::fs::create_dir_all(variant_dir)?;
+        let stem = job.dir.file_name().context("a run folder has a name")?.to_string_lossy().into_owned();
+        let mut config = job.config.clone();
+        config.threads = Some(threads);
+        let config_path = variant_dir.join(format!("{stem}.toml"));
+        write_atomic(&config_path, config.to_toml()?.as_bytes())?;
+        let log = std::fs::File::create(variant_dir.join(format!("{stem}.log")))?;
+        let mut cmd = std::process::Command::new(std::env::current_exe()?);
+        cmd.arg("--config").arg(&config_path).arg("--quiet");
+        if job.dir.join("config.toml").exists() {
+            cmd.arg("--resume");
+        }
+        if let Some(n) = self.max_steps {
+            cmd.arg("--max-steps").arg(n.to_string());
+        }
+        if let Some(n) = self.max_epochs {
+            cmd.arg("--max-epochs").arg(n.to_string());
+        }
+        cmd.stdout(log.try_clone()?).stderr(log);
+        cmd.spawn().with_context(|| format!("starting {} seed {}", job.variant, job.seed))
+    }
+}
+
+impl Executor for Processes {
+    fn execute(&mut self, todo: &[&Job], written: &mut dyn FnMut() -> Result<()>, verbose: bool) -> Result<Vec<String>> {
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let threads = (cores / self.jobs.max(1)).max(1);
+        for job in todo {
+            crate::data::ensure_training_data(&job.config.data)?;
+        }
+        let mut pending: std::collections::VecDeque<&Job> = todo.iter().copied().collect();
+        let mut running: Vec<(&Job, std::process::Child)> = Vec::new();
+        let mut failures = Vec::new();
+        let total = todo.len();
+        let mut started = 0;
+        while !pending.is_empty() || !running.is_empty() {
+            while running.len() < self.jobs.max(1) {
+                let Some(job) = pending.pop_front() else { break };
+                started += 1;
+                if verbose {
+                    eprintln!("[{started}/{total}] {} seed {} → {} ({threads} threads; log beside it)", job.variant, job.seed, job.dir.display());
+                }
+                match self.spawn(job, threads) {
+                    Ok(child) => running.push((job, child)),
+                    Err(e) => failures.push(format!("{} seed {}: {e:#}", job.variant, job.seed)),
+                }
+            }
+            std::thread::sleep(std::time::Duration::from_millis(100));
+            let mut i = 0;
+            while i < running.len() {
+                let Some(status) = running[i].1.try_wait()? else {
+                    i += 1;
+                    continue;
+                };
+                let (job, _) = running.remove(i);
+                if !status.success() {
+                    let log = job.dir.with_extension("log");
+                    let last = std::fs::read_to_string(&log).ok().and_then(|t| t.lines().rev().find(|l| !l.trim().is_empty()).map(str::to_string)).unwrap_or_default();
+                    eprintln!("{} seed {} failed ({status}): {last}", job.variant, job.seed);
+                    failures.push(format!("{} seed {}: {status}: {last} (log: {})", job.variant, job.seed, log.display()));
+                }
+                written()?;
+            }
+        }
+        Ok(failures)
     }
 }
 

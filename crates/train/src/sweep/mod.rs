@@ -31,7 +31,7 @@
 mod executor;
 mod results;
 
-pub use executor::{Executor, Local, plan, rescore, rescore_all, run_sweep, run_sweep_with, training};
+pub use executor::{Executor, Local, Processes, plan, rescore, rescore_all, run_sweep, run_sweep_with, training};
 pub use results::{SweepResults, VariantResult, aggregate};
 
 use std::collections::BTreeMap;
