@@ -118,6 +118,26 @@ impl Shape {
         }
     }
 
+    /// The shape moved from its own frame (x forward, the ground at z = 0) to the ground point
+    /// (x, y, z), turned by `yaw`: how people and objects are placed in the world.
+    pub fn placed(self, x: f64, y: f64, z: f64, yaw: f64) -> Shape {
+        let tr = |p: V3| {
+            let q = rot(p, yaw);
+            [q[0] + x, q[1] + y, q[2] + z]
+        };
+        match self {
+            Shape::Capsule { a, b, r } => Shape::Capsule { a: tr(a), b: tr(b), r },
+            Shape::Ellipsoid { c, radii, yaw: y0 } => Shape::Ellipsoid { c: tr(c), radii, yaw: y0 + yaw },
+            Shape::Cuboid { c, half, yaw: y0 } => Shape::Cuboid { c: tr(c), half, yaw: y0 + yaw },
+            Shape::Cylinder { c, r, z0, z1 } => {
+                let q = tr([c[0], c[1], 0.0]);
+                Shape::Cylinder { c: [q[0], q[1]], r, z0: z0 + z, z1: z1 + z }
+            }
+            Shape::PlaneZ(h) => Shape::PlaneZ(h + z),
+            Shape::Foliage { c, radii, density } => Shape::Foliage { c: tr(c), radii, density },
+        }
+    }
+
     /// Height range of the shape (culling by elevation is not done; used for placement).
     pub fn top(&self) -> f64 {
         match *self {

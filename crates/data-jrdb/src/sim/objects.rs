@@ -16,27 +16,7 @@ pub fn cuboid(x: f64, y: f64, z0: f64, sx: f64, sy: f64, sz: f64, yaw: f64) -> S
 
 /// Moves object-frame shapes (x forward along `yaw`, z up from the ground) to (x, y, z).
 pub fn placed(parts: Parts, x: f64, y: f64, z: f64, yaw: f64) -> Parts {
-    let tr = |p: V3| {
-        let q = rot(p, yaw);
-        [q[0] + x, q[1] + y, q[2] + z]
-    };
-    parts
-        .into_iter()
-        .map(|(s, r)| {
-            let s = match s {
-                Shape::Capsule { a, b, r } => Shape::Capsule { a: tr(a), b: tr(b), r },
-                Shape::Ellipsoid { c, radii, yaw: y0 } => Shape::Ellipsoid { c: tr(c), radii, yaw: y0 + yaw },
-                Shape::Cuboid { c, half, yaw: y0 } => Shape::Cuboid { c: tr(c), half, yaw: y0 + yaw },
-                Shape::Cylinder { c, r, z0, z1 } => {
-                    let q = tr([c[0], c[1], 0.0]);
-                    Shape::Cylinder { c: [q[0], q[1]], r, z0: z0 + z, z1: z1 + z }
-                }
-                Shape::PlaneZ(h) => Shape::PlaneZ(h + z),
-                Shape::Foliage { c, radii, density } => Shape::Foliage { c: tr(c), radii, density },
-            };
-            (s, r)
-        })
-        .collect()
+    parts.into_iter().map(|(s, r)| (s.placed(x, y, z, yaw), r)).collect()
 }
 
 fn local(x: f64, y: f64, z0: f64, sx: f64, sy: f64, sz: f64) -> Shape {

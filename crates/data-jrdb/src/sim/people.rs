@@ -199,24 +199,7 @@ impl Body {
 
 /// Places body-frame parts in the world: heading `yaw`, floor point `(x, y, floor)`.
 pub fn place(parts: &[Shape], x: f64, y: f64, floor: f64, yaw: f64) -> Vec<Shape> {
-    let tr = |p: V3| {
-        let q = rot(p, yaw);
-        [q[0] + x, q[1] + y, q[2] + floor]
-    };
-    parts
-        .iter()
-        .map(|s| match *s {
-            Shape::Capsule { a, b, r } => Shape::Capsule { a: tr(a), b: tr(b), r },
-            Shape::Ellipsoid { c, radii, yaw: y0 } => Shape::Ellipsoid { c: tr(c), radii, yaw: y0 + yaw },
-            Shape::Cuboid { c, half, yaw: y0 } => Shape::Cuboid { c: tr(c), half, yaw: y0 + yaw },
-            Shape::Cylinder { c, r, z0, z1 } => {
-                let q = tr([c[0], c[1], 0.0]);
-                Shape::Cylinder { c: [q[0], q[1]], r, z0: z0 + floor, z1: z1 + floor }
-            }
-            Shape::PlaneZ(z) => Shape::PlaneZ(z + floor),
-            Shape::Foliage { c, radii, density } => Shape::Foliage { c: tr(c), radii, density },
-        })
-        .collect()
+    parts.iter().map(|s| s.placed(x, y, floor, yaw)).collect()
 }
 
 /// The tight box of body-frame parts, in the world (l along the heading `yaw`).

@@ -11,11 +11,10 @@ use super::geometry::V3;
 use super::lidar::{Scanner, tip, untip};
 use super::rig::{Platform, Rig};
 use super::scene::{Prim, Scene, SceneKind};
-use super::writer::{SynthConfig, mix, mkdir};
+use super::writer::{SynthConfig, label, mix, mkdir, write_cloud};
 use crate::calibration::{Calibration, Lidar};
 use crate::error::Result;
-use crate::labels::{Label, write_labels};
-use crate::pcd::{Column, FieldType, write_pcd};
+use crate::labels::write_labels;
 use crate::split::Layout;
 use crate::timestamps::{FrameTime, write_timestamps};
 
@@ -81,7 +80,7 @@ pub(super) fn synth_sequence(layout: &Layout, seq: &str, index: u64, cfg: &Synth
                 let rets = Scanner::default().scan(&prims, origin, ryaw + t.yaw, mix(scan_seed, l as u64));
                 let xyz: Vec<[f32; 3]> = rets.iter().map(|r| [r.xyz[0] as f32, r.xyz[1] as f32, (r.xyz[2] + dz) as f32]).collect();
                 base_points.extend(xyz.iter().map(|&p| t.to_base(p)));
-                write_cloud(layout, seq, l, &name, &xyz, &rets.iter().map(|r| (r.intensity, r.ring)).collect::<Vec<_>>(), cfg)?;
+                write_cloud(&layout.cloud_dir(l, seq).join(format!("{name}.pcd")), &xyz, &rets, cfg.encoding)?;
             }
         } else {
             let origin = [rx, ry, ground + rig.height];
@@ -96,8 +95,8 @@ pub(super) fn synth_sequence(layout: &Layout, seq: &str, index: u64, cfg: &Synth
                 })
                 .collect();
             base_points.extend(xyz.iter().map(|&p| upper.to_base(p)));
-            write_cloud(layout, seq, Lidar::Upper, &name, &xyz, &rets.iter().map(|r| (r.intensity, r.ring)).collect::<Vec<_>>(), cfg)?;
-            write_cloud(layout, seq, Lidar::Lower, &name, &[], &[], cfg)?;
+            write_cloud(&layout.cloud_dir(Lidar::Upper, seq).join(format!("{name}.pcd")), &xyz, &rets, cfg.encoding)?;
+            write_cloud(&layout.cloud_dir(Lidar::Lower, seq).join(format!("{name}.pcd")), &[], &[], cfg.encoding)?;
         }
         n_points += base_points.len();
         let mut frame_labels = Vec::new();
@@ -113,9 +112,7 @@ pub(super) fn synth_sequence(layout: &Layout, seq: &str, index: u64, cfg: &Synth
             if b.bev_range() > cfg.label_range {
                 continue;
             }
-            let np = b.count_inside(&base_points) as i64;
-            let observation_angle = b.cy.atan2(b.cx) - b.rot_z;
-            frame_labels.push(Label { id: format!("pedestrian:{}", v.id), bbox: b, num_points: np, observation_angle });
+            frame_labels.push(label(v.id, b, &base_points));
         }
         n_boxes += frame_labels.len();
         labels.insert(format!("{name}.pcd"), frame_labels);
@@ -144,16 +141,4 @@ pub(super) fn write_rigs(out: &std::path::Path, names: &[String], seed: u64, clu
     }
     let path = out.join("rigs.csv");
     std::fs::write(&path, text).map_err(|e| crate::error::DataError::io(&path, e))
-}
-
-fn write_cloud(layout: &Layout, seq: &str, l: Lidar, name: &str, xyz: &[[f32; 3]], extra: &[(f32, u16)], cfg: &SynthConfig) -> Result<()> {
-    let col = |name: &str, ty, values: Vec<f64>| Column { name: name.into(), ty, values };
-    let cols = [
-        col("x", FieldType::F32, xyz.iter().map(|p| p[0] as f64).collect()),
-        col("y", FieldType::F32, xyz.iter().map(|p| p[1] as f64).collect()),
-        col("z", FieldType::F32, xyz.iter().map(|p| p[2] as f64).collect()),
-        col("intensity", FieldType::F32, extra.iter().map(|e| e.0 as f64).collect()),
-        col("ring", FieldType::U16, extra.iter().map(|e| e.1 as f64).collect()),
-    ];
-    write_pcd(&layout.cloud_dir(l, seq).join(format!("{name}.pcd")), &cols, cfg.encoding)
 }

@@ -7,9 +7,10 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
-use super::lidar::Scanner;
+use super::lidar::{Return, Scanner};
 use super::scene::{Scene, SceneKind};
 use crate::calibration::{Calibration, Lidar};
+use crate::box3d::Box3d;
 use crate::error::{DataError, Result};
 use crate::labels::{Label, write_labels};
 use crate::pcd::{Column, Encoding, FieldType, write_pcd};
@@ -190,6 +191,26 @@ pub(super) fn mix(a: u64, b: u64) -> u64 {
     z ^ (z >> 31)
 }
 
+/// One LiDAR's cloud as a PCD: x, y, z as written, the returns' intensity and ring.
+pub(super) fn write_cloud(path: &Path, xyz: &[[f32; 3]], rets: &[Return], encoding: Encoding) -> Result<()> {
+    let col = |name: &str, ty, values: Vec<f64>| Column { name: name.into(), ty, values };
+    let cols = [
+        col("x", FieldType::F32, xyz.iter().map(|p| p[0] as f64).collect()),
+        col("y", FieldType::F32, xyz.iter().map(|p| p[1] as f64).collect()),
+        col("z", FieldType::F32, xyz.iter().map(|p| p[2] as f64).collect()),
+        col("intensity", FieldType::F32, rets.iter().map(|r| r.intensity as f64).collect()),
+        col("ring", FieldType::U16, rets.iter().map(|r| r.ring as f64).collect()),
+    ];
+    write_pcd(path, &cols, encoding)
+}
+
+/// Person `id`'s label for base-frame box `b`, its points counted among the frame's.
+pub(super) fn label(id: usize, b: Box3d, base_points: &[[f32; 3]]) -> Label {
+    let num_points = b.count_inside(base_points) as i64;
+    let observation_angle = b.cy.atan2(b.cx) - b.rot_z;
+    Label { id: format!("pedestrian:{id}"), bbox: b, num_points, observation_angle }
+}
+
 pub(super) fn mkdir(p: &Path) -> Result<()> {
     std::fs::create_dir_all(p).map_err(|e| DataError::io(p, e))
 }
@@ -265,15 +286,7 @@ fn synth_sequence(layout: &Layout, seq: &str, index: u64, cfg: &SynthConfig, cal
             let t = calib.lidar(l);
             let xyz: Vec<[f32; 3]> = rets.iter().map(|r| [r.xyz[0] as f32, r.xyz[1] as f32, r.xyz[2] as f32]).collect();
             base_points.extend(xyz.iter().map(|&p| t.to_base(p)));
-            let col = |name: &str, ty, values: Vec<f64>| Column { name: name.into(), ty, values };
-            let cols = [
-                col("x", FieldType::F32, xyz.iter().map(|p| p[0] as f64).collect()),
-                col("y", FieldType::F32, xyz.iter().map(|p| p[1] as f64).collect()),
-                col("z", FieldType::F32, xyz.iter().map(|p| p[2] as f64).collect()),
-                col("intensity", FieldType::F32, rets.iter().map(|r| r.intensity as f64).collect()),
-                col("ring", FieldType::U16, rets.iter().map(|r| r.ring as f64).collect()),
-            ];
-            write_pcd(&layout.cloud_dir(l, seq).join(format!("{name}.pcd")), &cols, cfg.encoding)?;
+            write_cloud(&layout.cloud_dir(l, seq).join(format!("{name}.pcd")), &xyz, &rets, cfg.encoding)?;
         }
         n_points += base_points.len();
         let mut frame_labels = Vec::new();
@@ -282,9 +295,7 @@ fn synth_sequence(layout: &Layout, seq: &str, index: u64, cfg: &SynthConfig, cal
             if b.bev_range() > cfg.label_range {
                 continue;
             }
-            let np = b.count_inside(&base_points) as i64;
-            let observation_angle = b.cy.atan2(b.cx) - b.rot_z;
-            frame_labels.push(Label { id: format!("pedestrian:{}", v.id), bbox: b, num_points: np, observation_angle });
+            frame_labels.push(label(v.id, b, &base_points));
         }
         n_boxes += frame_labels.len();
         labels.insert(format!("{name}.pcd"), frame_labels);
