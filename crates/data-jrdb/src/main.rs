@@ -5,7 +5,7 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use clap::{Parser, Subcommand};
-use data_jrdb::sim::{Preset, SynthConfig, synth};
+use data_jrdb::sim::{Preset, SynthConfig, World, synth};
 use data_jrdb::{DatasetConfig, Encoding, JrdbDataset, Split, VoxelConfig, convention, stats};
 
 #[derive(Parser)]
@@ -55,8 +55,12 @@ enum Cmd {
         encoding: Enc,
         /// A named benchmark: its sequences, frames and naming replace --sequences, --frames
         /// and --max-people (--seed still applies).
-        #[arg(long, value_enum)]
+        #[arg(long, value_enum, conflicts_with = "backdrops")]
         preset: Option<PresetArg>,
+        /// Put simulated people into the real scans listed in DIR/backdrops.csv (their people
+        /// removed) instead of simulated places: --sequences sequences over them in turn.
+        #[arg(long, value_name = "DIR")]
+        backdrops: Option<PathBuf>,
     },
     /// Print frames, points, voxels and boxes per frame and points per box of a tree.
     Stats {
@@ -88,7 +92,7 @@ fn open_all(root: &std::path::Path, sequences: Option<Vec<String>>) -> anyhow::R
 
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.cmd {
-        Cmd::Synth { out, sequences, frames, seed, max_people, encoding, preset } => {
+        Cmd::Synth { out, sequences, frames, seed, max_people, encoding, preset, backdrops } => {
             let encoding = match encoding {
                 Enc::Ascii => Encoding::Ascii,
                 Enc::Binary => Encoding::Binary,
@@ -98,7 +102,10 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             let cfg = match preset {
                 Some(PresetArg::BenchV1) => SynthConfig { encoding, ..Preset::BenchV1.synth(seed) },
                 Some(PresetArg::BenchV2) => SynthConfig { encoding, ..Preset::BenchV2.synth(seed) },
-                None => SynthConfig { sequences, frames, seed, max_people, encoding, ..Default::default() },
+                None => {
+                    let world = if backdrops.is_some() { World::Backdrops } else { World::V1 };
+                    SynthConfig { sequences, frames, seed, max_people, encoding, world, backdrops, ..Default::default() }
+                }
             };
             let s = synth(&out, &cfg)?;
             println!(

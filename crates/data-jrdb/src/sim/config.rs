@@ -35,6 +35,11 @@ pub struct SimulateConfig {
     /// Sequence names: `jrdb` (JRDB's, its default split) or `benchmark` (`sim-val-*` for validation).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub naming: Option<Naming>,
+    /// A folder of real scans with their people removed (`backdrops.csv`, see
+    /// `sim::backdrop`): simulated people are ray-cast into them instead of into simulated
+    /// places. Training sequences only (`bd-train-*`); `preset` is not used with it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub backdrops: Option<std::path::PathBuf>,
 }
 
 impl SimulateConfig {
@@ -51,6 +56,8 @@ impl SimulateConfig {
             label_range: self.label_range.unwrap_or(base.label_range),
             frame_step: self.frame_step.unwrap_or(base.frame_step),
             naming: self.naming.unwrap_or(base.naming),
+            world: if self.backdrops.is_some() { super::World::Backdrops } else { base.world },
+            backdrops: self.backdrops.clone(),
             ..base
         }
     }

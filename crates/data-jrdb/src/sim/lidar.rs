@@ -108,7 +108,7 @@ fn scan_beams(p: &Scanner, elevations: &[f64], prims: &[Prim], origin: V3, yaw: 
             bins[b.rem_euclid(BINS as i64) as usize].push(i as u32);
         }
     }
-    let start = unit(seed) * std::f64::consts::TAU / p.columns as f64;
+    let start = column_start(seed, p.columns);
     let cols: Vec<Vec<Return>> = (0..p.columns)
         .into_par_iter()
         .map(|j| {
@@ -150,6 +150,12 @@ fn scan_beams(p: &Scanner, elevations: &[f64], prims: &[Prim], origin: V3, yaw: 
         })
         .collect();
     cols.into_iter().flatten().collect()
+}
+
+/// The azimuth (sensor frame, radians) of the first column of the scan drawn with `seed`: each
+/// revolution starts at a random fraction of a column.
+pub(super) fn column_start(seed: u64, columns: usize) -> f64 {
+    unit(seed) * std::f64::consts::TAU / columns as f64
 }
 
 /// A direction of the tipped sensor's frame in the level frame: `R_y(pitch) · R_x(roll) · d`.

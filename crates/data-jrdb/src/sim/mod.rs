@@ -2,6 +2,7 @@
 //! cluttered halls seen by many sensors on many platforms (`bench-v2`), written as a JRDB-format tree.
 
 /// `[data.simulate]`: the tree to generate when a run's data root is missing.
+pub mod backdrop;
 pub mod config;
 pub mod geometry;
 pub mod lidar;

@@ -28,13 +28,16 @@ pub enum SensorModel {
     Os1_128,
     /// Ouster OS0-128: 128 beams, ±45° uniform, 1024 columns (a robot's wide-view sensor).
     Os0_128,
+    /// Hesai Pandar64: 64 beams, −25° to +15°, 0.167° apart from −6° to +2° (real backdrops'
+    /// sensor; no `bench-v2` rig draws it).
+    Pandar64,
     /// Hesai Pandar128: 128 beams, −25° to +15°, 0.125° apart from −6° to +2°.
     Pandar128,
 }
 
 impl SensorModel {
     /// Every model, in the order above.
-    pub const ALL: [SensorModel; 10] = [
+    pub const ALL: [SensorModel; 11] = [
         SensorModel::Vlp16,
         SensorModel::Hdl32e,
         SensorModel::Vlp32c,
@@ -45,6 +48,7 @@ impl SensorModel {
         SensorModel::Os1_128,
         SensorModel::Os0_128,
         SensorModel::Pandar128,
+        SensorModel::Pandar64,
     ];
 
     /// Its name in statistics and file names.
@@ -60,7 +64,13 @@ impl SensorModel {
             SensorModel::Os1_128 => "os1-128",
             SensorModel::Os0_128 => "os0-128",
             SensorModel::Pandar128 => "pandar128",
+            SensorModel::Pandar64 => "pandar64",
         }
+    }
+
+    /// The model a name (as [`name`](Self::name) writes it) names.
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|m| m.name() == name)
     }
 
     /// Beam elevations in degrees, lowest first.
@@ -86,6 +96,11 @@ impl SensorModel {
             SensorModel::Os1_64 => uniform(-22.5, 22.5, 64),
             SensorModel::Os1_128 => uniform(-22.5, 22.5, 128),
             SensorModel::Os0_128 => uniform(-45.0, 45.0, 128),
+            SensorModel::Pandar64 => {
+                let mut e = vec![15.0, 11.0, 8.0, 5.0, 3.0, -7.0, -8.0, -9.0, -10.0, -11.0, -12.0, -13.0, -14.0, -19.0, -25.0];
+                e.extend(uniform(-6.0, 2.0, 49));
+                e
+            }
             SensorModel::Pandar128 => {
                 let mut e = uniform(-6.0, 2.0, 64);
                 e.extend(uniform(2.6, 15.0, 14));
@@ -112,7 +127,7 @@ impl SensorModel {
             SensorModel::Hdl64e => (2000, 100.0, 0.02),
             SensorModel::Os1_64 | SensorModel::Os1_128 => (1024, 100.0, 0.015),
             SensorModel::Os0_128 => (1024, 50.0, 0.02),
-            SensorModel::Pandar128 => (1800, 100.0, 0.02),
+            SensorModel::Pandar128 | SensorModel::Pandar64 => (1800, 100.0, 0.02),
         };
         Scanner { columns, max_range, range_noise, ..Scanner::default() }
     }
@@ -141,6 +156,7 @@ mod tests {
             (SensorModel::Os1_128, 128, -22.5, 22.5),
             (SensorModel::Os0_128, 128, -45.0, 45.0),
             (SensorModel::Pandar128, 128, -25.0, 15.0),
+            (SensorModel::Pandar64, 64, -25.0, 15.0),
         ] {
             let e = m.elevations_deg();
             assert_eq!(e.len(), n, "{}", m.name());

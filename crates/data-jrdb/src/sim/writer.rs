@@ -39,8 +39,10 @@ pub struct SynthConfig {
     pub frame_step: usize,
     /// How sequences are named, which decides their split and kind of place.
     pub naming: Naming,
-    /// The world simulated: bench-v1's scenes and rig, or bench-v2's.
+    /// The world simulated: bench-v1's scenes and rig, bench-v2's, or real backdrops.
     pub world: World,
+    /// With [`World::Backdrops`]: the folder of real scans (`backdrops.csv`) people are put into.
+    pub backdrops: Option<std::path::PathBuf>,
 }
 
 /// The simulator's generations; a new one never changes what an older one writes.
@@ -54,6 +56,9 @@ pub enum World {
     /// own body in view; each cloud written levelled, the ground under the platform at the base
     /// frame's floor (`World::V2` writes it as the upper sensor's cloud; the lower one is empty).
     V2,
+    /// Real scans with their people removed (`SynthConfig::backdrops`), simulated people ray-cast
+    /// into them with each scan's sensor model (`backdrop`); training sequences only.
+    Backdrops,
 }
 
 /// Names of simulated sequences.
@@ -134,6 +139,7 @@ impl Default for SynthConfig {
             frame_step: 1,
             naming: Naming::Jrdb,
             world: World::V1,
+            backdrops: None,
         }
     }
 }
@@ -225,6 +231,12 @@ pub fn synth(out: &Path, cfg: &SynthConfig) -> Result<SynthSummary> {
     mkdir(&out.join("calibration"))?;
     calib.write(&layout.calibration_file())?;
     mkdir(&out.join("labels").join("labels_3d"))?;
+    if cfg.world == World::Backdrops {
+        let dir = cfg.backdrops.as_deref().ok_or_else(|| DataError::key(out, "backdrops", "the backdrops world needs a folder of real scans"))?;
+        let backdrops = super::backdrop::read_backdrops(dir)?;
+        let (sequences, frames, points, boxes) = super::backdrop::synth_backdrops(&layout, &backdrops, cfg, &calib)?;
+        return Ok(SynthSummary { sequences, frames, points, boxes });
+    }
     let names = names_for(cfg.naming, cfg.sequences);
     let mut summary = SynthSummary { sequences: names.clone(), ..Default::default() };
     // Sequences one after another; the rays of each scan run in parallel.
@@ -232,6 +244,7 @@ pub fn synth(out: &Path, cfg: &SynthConfig) -> Result<SynthSummary> {
     for (si, seq) in names.iter().enumerate() {
         let (f, p, b) = match cfg.world {
             World::V1 => synth_sequence(&layout, seq, si as u64, cfg, &calib)?,
+            World::Backdrops => unreachable!("written above"),
             World::V2 => {
                 let (f, p, b, c) = super::world_v2::synth_sequence(&layout, seq, si as u64, cfg, &calib)?;
                 clutter.push(c);
