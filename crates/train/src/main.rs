@@ -245,7 +245,45 @@ enum Cmd {
         /// split between them (threads per run = cores / N; the results are the same).
         #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..))]
         jobs: u16,
+        /// Submit the runs to Slurm instead: one job array (a task per run, resuming its folder,
+        /// checkpointing and requeueing itself before its time limit) and a job after it that
+        /// writes the tables. With --dry-run, print the batch scripts and sbatch lines.
+        #[command(flatten)]
+        slurm: SlurmArgs,
+        /// Each run's state (finished, pending, running, failed with its log's last line) from
+        /// the run folders and Slurm's queue.
+        #[arg(long, conflicts_with_all = ["rescore", "dry_run"])]
+        status: bool,
+        /// Only write the tables from the runs finished so far (what the Slurm tables job runs).
+        #[arg(long, conflicts_with_all = ["rescore", "dry_run", "status"])]
+        tables: bool,
     },
+}
+
+/// `train sweep --slurm` and the `sbatch` options of its tasks.
+#[derive(Args)]
+struct SlurmArgs {
+    /// Submit to Slurm (see `sweep --help`).
+    #[arg(long)]
+    slurm: bool,
+    /// sbatch --partition.
+    #[arg(long, requires = "slurm")]
+    partition: Option<String>,
+    /// sbatch --time: each task's limit (it checkpoints and requeues 2 minutes before).
+    #[arg(long, requires = "slurm")]
+    time: Option<String>,
+    /// sbatch --cpus-per-task, also each run's threads.
+    #[arg(long, requires = "slurm")]
+    cpus_per_task: Option<u32>,
+    /// sbatch --gpus-per-task.
+    #[arg(long, requires = "slurm")]
+    gpus_per_task: Option<u32>,
+    /// sbatch --mem.
+    #[arg(long, requires = "slurm")]
+    mem: Option<String>,
+    /// Any other sbatch option, as written (repeatable): --sbatch-arg=--qos=long.
+    #[arg(long = "sbatch-arg", value_name = "OPTION", requires = "slurm", allow_hyphen_values = true)]
+    sbatch_args: Vec<String>,
 }
 
 /// A run's checkpoint on frames it is not scored on: what `calibrate` and `facing` measure on.
@@ -368,7 +406,8 @@ fn run_train(a: TrainArgs) -> Result<()> {
     // would make the next attempt ask for --resume or --overwrite).
     cfg.backend.device()?;
     let run = RunDir::create(&dir, &cfg, existing)?;
-    let opts = TrainOptions { resume: a.resume, max_steps: a.max_steps, max_epochs: a.max_epochs, verbose: !a.quiet };
+    let stop = stop_on_signals()?;
+    let opts = TrainOptions { resume: a.resume, max_steps: a.max_steps, max_epochs: a.max_epochs, verbose: !a.quiet, stop: Some(stop.clone()) };
     let s = train::train(&cfg, &run, &opts)?;
     let ap = s.last_ap3d.map_or_else(|| "not validated".to_string(), |a| format!("AP3D@0.3/0.5/0.7 {:.1}/{:.1}/{:.1} %", 100.0 * a[0], 100.0 * a[1], 100.0 * a[2]));
     println!(
@@ -380,7 +419,27 @@ fn run_train(a: TrainArgs) -> Result<()> {
         s.train_seconds,
         run.root.display()
     );
+    if stop.load(std::sync::atomic::Ordering::Relaxed) && !s.finished {
+        eprintln!("stopped by a signal after step {} with a checkpoint; --resume continues", s.steps);
+        std::process::exit(STOPPED_BY_SIGNAL);
+    }
     Ok(())
+}
+
+/// The exit status of a run stopped by SIGTERM or SIGUSR1 with its checkpoint written
+/// (`EX_TEMPFAIL`: try again; a Slurm task requeues itself on it).
+const STOPPED_BY_SIGNAL: i32 = 75;
+
+/// SIGTERM and SIGUSR1 (a scheduler's preemption, or its warning before a time limit) stop a
+/// run after its current step with a checkpoint. A second one changes nothing (a scheduler may
+/// signal both the batch shell, which passes it on, and the run); SIGINT still ends it at once.
+fn stop_on_signals() -> Result<std::sync::Arc<std::sync::atomic::AtomicBool>> {
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    #[cfg(unix)]
+    for sig in [signal_hook::consts::SIGTERM, signal_hook::consts::SIGUSR1] {
+        signal_hook::flag::register(sig, stop.clone())?;
+    }
+    Ok(stop)
 }
 
 fn main() -> ExitCode {
@@ -484,7 +543,7 @@ fn main() -> ExitCode {
             };
             train::serve::serve(&opts)
         })(),
-        Some(Cmd::Sweep { file, backend, max_steps, max_epochs, variants, dry_run, rescore, jobs: parallel }) => (|| -> Result<()> {
+        Some(Cmd::Sweep { file, backend, max_steps, max_epochs, variants, dry_run, rescore, jobs: parallel, slurm, status, tables }) => (|| -> Result<()> {
             let (sweep, base) = SweepConfig::load(&file)?;
             let mut jobs = sweep.jobs(&base)?;
             if let Some(b) = backend {
@@ -495,6 +554,44 @@ fn main() -> ExitCode {
                 bail!("all runs of a sweep use one backend");
             }
             pin(b);
+            let mut executor = train::sweep::Slurm {
+                sweep_file: file.clone(),
+                sweep_dir: sweep.dir(),
+                name: sweep.name.clone().unwrap_or_default(),
+                partition: slurm.partition,
+                time: slurm.time,
+                cpus_per_task: slurm.cpus_per_task,
+                gpus_per_task: slurm.gpus_per_task,
+                mem: slurm.mem,
+                sbatch_args: slurm.sbatch_args,
+                max_steps,
+                max_epochs,
+                dry_run,
+            };
+            if status {
+                for (j, s) in jobs.iter().zip(executor.status(&jobs)?) {
+                    println!("{} seed {}: {s} ({})", j.variant, j.seed, j.dir.display());
+                }
+                return Ok(());
+            }
+            if tables {
+                let results = train::sweep::aggregate(&jobs);
+                results.write(&sweep.dir())?;
+                println!("{}", results.to_markdown());
+                println!("results in {}", sweep.dir().display());
+                return Ok(());
+            }
+            if slurm.slurm && dry_run {
+                train::sweep::check_variants(&jobs, &variants)?;
+                let todo: Vec<&train::sweep::Job> = jobs.iter().filter(|j| (variants.is_empty() || variants.contains(&j.variant)) && train::sweep::finished(&j.dir).is_none()).collect();
+                use train::sweep::Executor;
+                executor.execute(&todo, &mut || Ok(()), true)?;
+                return Ok(());
+            }
+            if slurm.slurm {
+                train::sweep::run_sweep_with(&sweep, &jobs, &variants, &mut executor, true)?;
+                return Ok(());
+            }
             if dry_run {
                 train::sweep::plan(&jobs, &variants)?.iter().for_each(|line| println!("{line}"));
                 return Ok(());

@@ -40,6 +40,9 @@ pub struct TrainOptions {
     pub max_epochs: Option<usize>,
     /// Draw progress bars (on a terminal) and print a line per epoch.
     pub verbose: bool,
+    /// Set (by a signal handler) to stop after the current step with a checkpoint, as
+    /// `--max-steps` stops; a later `--resume` goes on as if nothing had happened.
+    pub stop: Option<std::sync::Arc<std::sync::atomic::AtomicBool>>,
 }
 
 /// What a training invocation did; also written to `summary.json`.
@@ -237,9 +240,9 @@ impl<'a> Session<'a> {
         }
     }
 
-    /// Whether `--max-steps` is reached.
+    /// Whether `--max-steps` is reached or a stop was asked for.
     fn steps_exhausted(&self) -> bool {
-        self.opts.max_steps.is_some_and(|m| self.state.step >= m)
+        self.opts.max_steps.is_some_and(|m| self.state.step >= m) || self.opts.stop.as_ref().is_some_and(|s| s.load(std::sync::atomic::Ordering::Relaxed))
     }
 
     fn epoch_bar(&self) -> ProgressBar {

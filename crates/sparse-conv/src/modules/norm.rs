@@ -102,6 +102,11 @@ impl SparseBatchNorm {
             };
             bn.running_mean.update(blend(bn.running_mean.value_sync().to_device(&device), stat(0)));
             bn.running_var.update(blend(bn.running_var.value_sync().to_device(&device), stat(1)));
+            // Burn holds an update per thread until the next sync, and a saved record reads the
+            // synced value: without this, a checkpoint written between steps (not after a
+            // validation, which syncs) missed the last step's update, and a run resumed from it
+            // validated differently from an uninterrupted one.
+            let _ = (bn.running_mean.value_sync(), bn.running_var.value_sync());
         }
         out
     }

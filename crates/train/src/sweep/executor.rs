@@ -91,7 +91,7 @@ pub fn training(max_steps: Option<u64>, max_epochs: Option<usize>) -> Local<impl
             let existing = if job.dir.join("config.toml").exists() { Existing::Resume } else { Existing::Refuse };
             job.config.backend.device()?;
             let run = RunDir::create(&job.dir, &job.config, existing)?;
-            let opts = TrainOptions { resume: existing == Existing::Resume, max_steps, max_epochs, verbose: true };
+            let opts = TrainOptions { resume: existing == Existing::Resume, max_steps, max_epochs, verbose: true, stop: None };
             train(&job.config, &run, &opts)
         },
     }

@@ -25,13 +25,16 @@
 //!
 //! Here: the file format and its expansion into [`Job`](crate::sweep::Job)s; `executor`: who runs
 //! them (the [`Executor`](crate::sweep::Executor) seam, the [`Local`](crate::sweep::Local) one that
-//! trains in this process, rescoring); `results`: the tables (statistics in [`crate::stats`]). A
-//! cluster executor is one more [`Executor`](crate::sweep::Executor).
+//! trains in this process, [`Processes`](crate::sweep::Processes) for `--jobs N`, rescoring);
+//! `slurm`: the cluster's ([`Slurm`](crate::sweep::Slurm), `--slurm`: a job array and a tables
+//! job); `results`: the tables (statistics in [`crate::stats`]).
 
 mod executor;
 mod results;
+mod slurm;
 
 pub use executor::{Executor, Local, Processes, plan, rescore, rescore_all, run_sweep, run_sweep_with, training};
+pub use slurm::{RunState, Slurm};
 pub use results::{SweepResults, VariantResult, aggregate};
 
 use std::collections::BTreeMap;
