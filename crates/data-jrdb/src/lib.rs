@@ -38,6 +38,8 @@ pub mod loader;
 pub mod lzf;
 /// PCD reader and writer.
 pub mod pcd;
+/// ROS's PointCloud2 message decoded into points.
+pub mod pointcloud2;
 /// The JRDB-format simulator.
 pub mod sim;
 /// Layout of a tree and its splits.

@@ -8,8 +8,11 @@
 //! ```
 //!
 //! `<name>` is a file's stem, a file's path under a folder given (without extension), or
-//! `<sequence>/<frame>` for a tree's frames. The service (`serve`) answers the same
-//! [`FrameReport`].
+//! `<sequence>/<frame>` for a tree's frames. A recording (`.mcap`, `--topic`) is one input whose
+//! messages are frames: `<name>/<index>` (index from 0 in the file's order), and `OUT/<name>.jsonl`
+//! holds one report per line with each message's stamp and frame id; `--mcap OUT.mcap` writes the
+//! clouds and the people for Foxglove (`scene`). The service (`serve`)
+//! answers the same [`FrameReport`].
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -24,6 +27,9 @@ use indicatif::ProgressBar;
 use serde::{Deserialize, Serialize};
 
 use crate::detector::RunDetector;
+use crate::recording::{Recording, is_recording};
+use crate::scene::SceneWriter;
+use data_jrdb::cloud::ReadLimits;
 use crate::progress;
 use crate::render::render_bev;
 use crate::sensor_pose::{FrameSpec, Placement, SensorPose};
@@ -83,6 +89,24 @@ pub struct FrameReport {
     pub detections: Vec<BoxRecord>,
     /// The score threshold applied.
     pub score_threshold: f64,
+    /// A recording's message: its header's stamp (seconds) and frame id, its index on the topic.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub message: Option<MessageInfo>,
+}
+
+/// Where a frame of a recording came from.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MessageInfo {
+    /// The topic.
+    pub topic: String,
+    /// Its index on the topic, from 0, in the file's order.
+    pub index: usize,
+    /// `header.stamp` in seconds.
+    pub stamp: f64,
+    /// `header.frame_id`.
+    pub frame_id: String,
+    /// The recording's log time of the message (nanoseconds).
+    pub log_time_ns: u64,
 }
 
 /// A cloud's people in the base frame (for drawing) and in the input's frame (for writing).
@@ -143,6 +167,8 @@ pub enum Source {
     File(PathBuf),
     /// Frame `index` of a JRDB-format tree (both LiDARs merged by its calibration).
     Tree(Arc<JrdbDataset>, usize),
+    /// A recording (MCAP): every point cloud on `DetectOptions::topic`.
+    Recording(PathBuf),
 }
 
 /// One frame to detect in, and the name its outputs get.
@@ -157,7 +183,7 @@ pub struct Input {
 impl Input {
     fn describe(&self) -> String {
         match &self.source {
-            Source::File(p) => p.display().to_string(),
+            Source::File(p) | Source::Recording(p) => p.display().to_string(),
             Source::Tree(ds, i) => format!("{}/{}/{}", ds.layout.root.display(), ds.frames[*i].sequence, ds.frames[*i].name),
         }
     }
@@ -202,7 +228,8 @@ fn add_path(p: &Path, inputs: &mut Vec<Input>) -> Result<()> {
     let meta = std::fs::metadata(p).with_context(|| format!("{}: no such file or folder", p.display()))?;
     if !meta.is_dir() {
         let name = p.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| p.display().to_string());
-        inputs.push(Input { source: Source::File(p.to_path_buf()), name });
+        let source = if is_recording(p) { Source::Recording(p.to_path_buf()) } else { Source::File(p.to_path_buf()) };
+        inputs.push(Input { source, name });
         return Ok(());
     }
     if Layout::resolve(p).is_ok() {
@@ -253,6 +280,10 @@ pub struct DetectOptions {
     pub render: bool,
     /// A progress bar for more than one frame.
     pub verbose: bool,
+    /// The topic of the point clouds in a recording.
+    pub topic: Option<String>,
+    /// Also write the recordings' clouds and the people found as an MCAP Foxglove opens.
+    pub mcap: Option<PathBuf>,
 }
 
 /// What `detect` did.
@@ -274,35 +305,113 @@ pub struct DetectSummary {
 /// is reported in the summary and the others go on.
 pub fn detect(detector: &RunDetector, inputs: &[Input], opts: &DetectOptions) -> Result<DetectSummary> {
     std::fs::create_dir_all(&opts.out).with_context(|| format!("{}: creating the output folder", opts.out.display()))?;
-    let pb = if opts.verbose && inputs.len() > 1 { progress::bar(inputs.len() as u64, "detect") } else { ProgressBar::hidden() };
+    // A recording counts its messages on the topic where its summary says them.
+    let mut frames = 0u64;
+    let mut recordings = Vec::new();
+    for input in inputs {
+        match &input.source {
+            Source::Recording(p) => {
+                let Some(topic) = opts.topic.as_deref() else {
+                    let topics = Recording::open(p)?.topics()?;
+                    bail!("{}: a recording: give --topic (its topics: {})", p.display(), topics.iter().map(|t| format!("{} [{}]", t.name, t.schema)).collect::<Vec<_>>().join(", "));
+                };
+                let r = Recording::open(p)?;
+                frames += r.topics()?.iter().find(|t| t.name == topic).and_then(|t| t.messages).unwrap_or(0);
+                recordings.push(r);
+            }
+            _ => frames += 1,
+        }
+    }
+    if let Some(out) = &opts.mcap {
+        ensure!(inputs.iter().all(|i| matches!(i.source, Source::Recording(_))), "--mcap {}: every input must be a recording (.mcap)", out.display());
+    }
+    let mut scene = opts.mcap.as_deref().map(SceneWriter::create).transpose()?;
+    let pb = if opts.verbose && frames > 1 { progress::bar(frames, "detect") } else { ProgressBar::hidden() };
     let mut summary = DetectSummary::default();
     let start = Instant::now();
+    let mut recordings = recordings.into_iter();
     for input in inputs {
+        if let Source::Recording(p) = &input.source {
+            let r = recordings.next().expect("one opened per recording input");
+            if let Err(e) = detect_recording(detector, &r, input, opts, &pb, &mut summary, scene.as_mut()) {
+                pb.suspend(|| eprintln!("skipped the rest of {}: {e:#}", p.display()));
+                summary.failed.push((p.display().to_string(), format!("{e:#}")));
+            }
+            continue;
+        }
         // A panic on one input (inside the model, say) fails that input alone.
         let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| detect_one(detector, input, opts)))
             .unwrap_or_else(|payload| Err(anyhow::anyhow!("the detector failed on this cloud: {}", panic_message(&*payload))));
-        match outcome {
-            Ok((n, secs)) => {
-                summary.frames += 1;
-                summary.boxes += n;
-                summary.detect_seconds += secs;
-            }
-            Err(e) => {
-                let (what, why) = (input.describe(), format!("{e:#}"));
-                // Reader errors name the file themselves.
-                let line = if why.starts_with(&what) { why.clone() } else { format!("{what}: {why}") };
-                pb.suspend(|| eprintln!("skipped {line}"));
-                summary.failed.push((what, why));
-            }
-        }
+        record(&mut summary, &pb, input.describe(), outcome.map(|(r, secs)| (r.detections.len(), secs)));
         pb.inc(1);
     }
     pb.finish_and_clear();
+    if let Some(scene) = scene {
+        scene.finish()?;
+    }
     summary.seconds = start.elapsed().as_secs_f64();
     Ok(summary)
 }
 
-fn detect_one(detector: &RunDetector, input: &Input, opts: &DetectOptions) -> Result<(usize, f64)> {
+fn record(summary: &mut DetectSummary, pb: &ProgressBar, what: String, outcome: Result<(usize, f64)>) {
+    match outcome {
+        Ok((n, secs)) => {
+            summary.frames += 1;
+            summary.boxes += n;
+            summary.detect_seconds += secs;
+        }
+        Err(e) => {
+            let why = format!("{e:#}");
+            // Reader errors name the file themselves.
+            let line = if why.starts_with(&what) { why.clone() } else { format!("{what}: {why}") };
+            pb.suspend(|| eprintln!("skipped {line}"));
+            summary.failed.push((what, why));
+        }
+    }
+}
+
+/// Every point cloud of a recording's topic: a frame each, written as `<name>/<index>` and a line
+/// of `OUT/<name>.jsonl`; a message that cannot be decoded is reported and the next one read.
+fn detect_recording(detector: &RunDetector, r: &Recording, input: &Input, opts: &DetectOptions, pb: &ProgressBar, summary: &mut DetectSummary, mut scene: Option<&mut SceneWriter>) -> Result<()> {
+    let topic = opts.topic.as_deref().context("--topic")?;
+    let limits = ReadLimits::NONE;
+    let jsonl_path = opts.out.join(format!("{}.jsonl", input.name));
+    if let Some(dir) = jsonl_path.parent() {
+        std::fs::create_dir_all(dir).with_context(|| format!("{}: creating the folder", dir.display()))?;
+    }
+    let mut jsonl = std::io::BufWriter::new(std::fs::File::create(&jsonl_path).with_context(|| format!("{}: creating", jsonl_path.display()))?);
+    for (index, m) in r.clouds(topic, &limits)?.enumerate() {
+        let what = format!("{} message {index} on {topic}", input.describe());
+        let outcome = m.and_then(|m| {
+            let cloud = m.cloud;
+            let frame = Input { source: input.source.clone(), name: format!("{}/{index:06}", input.name) };
+            let message = MessageInfo { topic: topic.to_string(), index, stamp: cloud.stamp.seconds(), frame_id: cloud.frame_id.clone(), log_time_ns: m.log_time };
+            let placement = opts.frame.place(&cloud.points);
+            let (stamp, frame_id) = (cloud.stamp, cloud.frame_id.clone());
+            let (report, secs) = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                write_frame(detector, &frame, opts, cloud.points, cloud.dropped_non_finite, "mcap", placement, Some(message))
+            }))
+            .unwrap_or_else(|payload| Err(anyhow::anyhow!("the detector failed on this cloud: {}", panic_message(&*payload))))?;
+            if let Some(scene) = scene.as_deref_mut() {
+                scene.copy(&m.channel, m.log_time, m.publish_time, &m.data)?;
+                scene.people(m.log_time, stamp, &frame_id, &report.detections)?;
+            }
+            Ok((report, secs))
+        });
+        let outcome = outcome.and_then(|(report, secs)| {
+            use std::io::Write;
+            writeln!(jsonl, "{}", serde_json::to_string(&report)?).with_context(|| format!("{}: writing", jsonl_path.display()))?;
+            Ok((report.detections.len(), secs))
+        });
+        record(summary, pb, what, outcome);
+        pb.inc(1);
+    }
+    use std::io::Write;
+    jsonl.flush().with_context(|| format!("{}: writing", jsonl_path.display()))?;
+    Ok(())
+}
+
+fn detect_one(detector: &RunDetector, input: &Input, opts: &DetectOptions) -> Result<(FrameReport, f64)> {
     let (points, dropped, format, placement) = match &input.source {
         Source::File(p) => {
             let c = read_cloud(p)?;
@@ -313,7 +422,15 @@ fn detect_one(detector: &RunDetector, input: &Input, opts: &DetectOptions) -> Re
             let f = ds.load(*i)?;
             (f.points, f.dropped_non_finite, "jrdb", Placement { pose: SensorPose::default(), how: "the tree's calibration".into() })
         }
+        Source::Recording(_) => unreachable!("recordings are read message by message"),
     };
+    write_frame(detector, input, opts, points, dropped, format, placement, None)
+}
+
+/// Finds the people of one frame and writes its outputs; returns its report and the detector's
+/// time.
+#[allow(clippy::too_many_arguments)]
+fn write_frame(detector: &RunDetector, input: &Input, opts: &DetectOptions, points: Vec<[f32; 3]>, dropped: usize, format: &str, placement: Placement, message: Option<MessageInfo>) -> Result<(FrameReport, f64)> {
     let pose = placement.pose;
     let t = Instant::now();
     let found = find_people(detector, &points, &pose, opts.score_threshold);
@@ -328,6 +445,7 @@ fn detect_one(detector: &RunDetector, input: &Input, opts: &DetectOptions) -> Re
         frame: placement.how,
         detections: found.input.iter().map(|d| BoxRecord::new(&d.bbox, d.score)).collect(),
         score_threshold: opts.score_threshold,
+        message,
     };
     let json = opts.out.join("json").join(format!("{}.json", input.name));
     write_file(&json, serde_json::to_string_pretty(&report)?.as_bytes())?;
@@ -345,7 +463,7 @@ fn detect_one(detector: &RunDetector, input: &Input, opts: &DetectOptions) -> Re
         let frame = FrameResult { sequence: String::new(), name: input.name.clone(), gt: Vec::new(), num_points: Vec::new(), detections: found.base };
         render_bev(&found.base_points, &frame, &png, detector.config().eval.max_range.unwrap_or(25.0))?;
     }
-    Ok((report.detections.len(), secs))
+    Ok((report, secs))
 }
 
 fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {

@@ -34,6 +34,10 @@ pub mod detector;
 pub mod detect;
 /// The facing stage of a checkpoint, fitted on its own boxes.
 pub mod facing;
+/// MCAP recordings (ROS 2 bags) of point clouds, read message by message.
+pub mod recording;
+/// Detections as an MCAP scene Foxglove and Lichtblick open.
+pub mod scene;
 /// Detection files and scores from a checkpoint.
 pub mod infer;
 /// CSV curves.

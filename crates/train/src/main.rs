@@ -172,9 +172,10 @@ enum Cmd {
         #[arg(long)]
         write: bool,
     },
-    /// Detect people in point-cloud files (PCD, KITTI .bin, nuScenes .pcd.bin, .npy), folders of them, glob patterns
-    /// or JRDB-format trees; write OUT/json/NAME.json, OUT/kitti/NAME.txt and with --render
-    /// OUT/render/NAME.png per frame.
+    /// Detect people in point-cloud files (PCD, KITTI .bin, nuScenes .pcd.bin, .npy), folders of them, glob patterns,
+    /// JRDB-format trees or recordings (.mcap with --topic); write OUT/json/NAME.json,
+    /// OUT/kitti/NAME.txt and with --render OUT/render/NAME.png per frame (a recording's frames
+    /// are NAME/INDEX, and OUT/NAME.jsonl holds a line per message with its stamp).
     Detect {
         /// Files, folders (searched recursively), quoted glob patterns, JRDB-format trees.
         #[arg(required = true, value_name = "PATH")]
@@ -187,6 +188,16 @@ enum Cmd {
         /// Also draw each frame as a bird's-eye-view PNG (JRDB's base frame).
         #[arg(long)]
         render: bool,
+        /// The topic of sensor_msgs/msg/PointCloud2 messages in a recording (.mcap).
+        #[arg(long)]
+        topic: Option<String>,
+        /// Only list each recording's topics (name, schema, encoding, messages).
+        #[arg(long)]
+        list_topics: bool,
+        /// Also write the recordings' clouds and the people found (foxglove.SceneUpdate on
+        /// /pmunet/people) to this MCAP, for Foxglove or Lichtblick.
+        #[arg(long, value_name = "OUT.mcap")]
+        mcap: Option<PathBuf>,
     },
     /// Serve the detector over HTTP: POST /detect with a point cloud, GET /health.
     Serve {
@@ -493,11 +504,19 @@ fn main() -> ExitCode {
             }
             Ok(())
         })(),
-        Some(Cmd::Detect { paths, model, out, render }) => (|| -> Result<()> {
+        Some(Cmd::Detect { paths, model, out, render, topic, list_topics, mcap }) => (|| -> Result<()> {
+            if list_topics {
+                for p in &paths {
+                    for t in train::recording::Recording::open(p)?.topics()? {
+                        println!("{}\t{}\t{}\t{}\t{}", p.display(), t.name, t.schema, t.encoding, t.messages.map_or_else(|| "?".into(), |n| n.to_string()));
+                    }
+                }
+                return Ok(());
+            }
             let model = model.prepare()?;
             let inputs = train::detect::collect_inputs(&paths)?;
             let detector = RunDetector::load(&model.run, model.slot(), model.backend)?;
-            let opts = DetectOptions { frame: model.transform, score_threshold: model.score_threshold, out: out.clone(), render, verbose: true };
+            let opts = DetectOptions { frame: model.transform, score_threshold: model.score_threshold, out: out.clone(), render, verbose: true, topic, mcap };
             let s = train::detect::detect(&detector, &inputs, &opts)?;
             println!(
                 "{} frames, {} people scoring ≥ {} in {:.1} s: {:.2} frames/s ({:.2} frames/s in the detector alone); outputs in {}",

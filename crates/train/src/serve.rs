@@ -363,6 +363,7 @@ async fn detect_handler(State(state): State<AppState>, uri: axum::http::Uri, hea
                 frame: placement.how,
                 detections,
                 score_threshold,
+                message: None,
             };
             let mut value = serde_json::to_value(&report).unwrap_or_default();
             value["ms"] = json!(started.elapsed().as_secs_f64() * 1e3);

@@ -1,0 +1,146 @@
+//! `detect` on a recording written by the reference tools (`tests/fixtures/recordings/clouds.mcap`,
+//! Python's `mcap` + `mcap-ros2-support`, `tools/make_recording_fixtures.py`): a real scan as
+//! sensor_msgs/msg/PointCloud2 in three layouts (a Velodyne driver's, an organised cloud with
+//! missing returns, float64 big-endian). Every message gives the boxes `detect` gives on the same
+//! points as an `.npy`, with its stamp and frame id; topics are listed; a topic that holds no
+//! clouds, a missing `--topic` and a damaged file are named, never a panic.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use data_jrdb::encode_npy;
+use train::FrameReport;
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+fn fixture() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/recordings/clouds.mcap")
+}
+
+fn train_bin(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_train")).args(args).env("NO_COLOR", "1").output().expect("runs")
+}
+
+fn ok(args: &[&str]) -> std::process::Output {
+    let out = train_bin(args);
+    assert!(out.status.success(), "train {args:?} failed:\n{}\n{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    out
+}
+
+fn report(path: &Path) -> FrameReport {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))).unwrap()
+}
+
+/// The fixture's points: every 4th point of the real nuScenes scan, as the script took them.
+fn scan_npy(dir: &Path) -> PathBuf {
+    let bytes = std::fs::read(root().join("real-scans/nuscenes/1532402927647951.npy")).unwrap();
+    let cloud = data_jrdb::cloud::parse_cloud(&bytes, data_jrdb::CloudFormat::Npy).unwrap();
+    let pts: Vec<[f32; 3]> = cloud.points.iter().step_by(4).copied().collect();
+    let data: Vec<u8> = pts.iter().flatten().flat_map(|v| v.to_le_bytes()).collect();
+    let path = dir.join("scan.npy");
+    std::fs::write(&path, encode_npy("<f4", &format!("({}, 3)", pts.len()), &data)).unwrap();
+    path
+}
+
+#[test]
+fn every_message_gives_the_boxes_of_its_points_with_its_stamp() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mcap = fixture();
+    let topics = String::from_utf8(ok(&["detect", mcap.to_str().unwrap(), "--list-topics"]).stdout).unwrap();
+    for line in ["/velodyne_points\tsensor_msgs/msg/PointCloud2\tcdr\t2", "/ouster/points\tsensor_msgs/msg/PointCloud2\tcdr\t1", "/camera/info\tstd_msgs/msg/String\tcdr\t1"] {
+        assert!(topics.contains(line), "{line} in:\n{topics}");
+    }
+    let npy = scan_npy(tmp.path());
+    let plain = tmp.path().join("plain");
+    // A low threshold: a quarter of the scan's points leaves few confident boxes to compare.
+    ok(&["detect", npy.to_str().unwrap(), "--out", plain.to_str().unwrap(), "--score-threshold", "0.05"]);
+    let want = report(&plain.join("json/scan.json"));
+    assert!(want.detections.len() >= 3, "boxes to compare: {:?}", want.detections);
+    for (topic, messages, frame_id, nan) in [("/velodyne_points", 2, "lidar_top", false), ("/ouster/points", 1, "os_sensor", true), ("/be64/points", 1, "lidar_top", false)] {
+        let out = tmp.path().join(topic.replace('/', "_"));
+        ok(&["detect", mcap.to_str().unwrap(), "--topic", topic, "--out", out.to_str().unwrap(), "--score-threshold", "0.05"]);
+        let lines: Vec<FrameReport> = std::fs::read_to_string(out.join("clouds.jsonl")).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+        assert_eq!(lines.len(), messages, "{topic}");
+        for (i, line) in lines.iter().enumerate() {
+            let m = line.message.as_ref().expect("a recording's report says its message");
+            assert_eq!((m.topic.as_str(), m.index, m.frame_id.as_str()), (topic, i, frame_id));
+            assert!(m.stamp > 1.5e9 && (m.stamp.fract() - 0.25).abs() < 1e-6, "{topic}: stamp {}", m.stamp);
+            assert_eq!(*line, report(&out.join(format!("json/clouds/{i:06}.json"))), "the line is the frame's JSON");
+            assert!(out.join(format!("kitti/clouds/{i:06}.txt")).is_file());
+            assert_eq!(line.points, want.points, "{topic}");
+            assert_eq!(line.dropped_non_finite > 0, nan, "{topic}: missing returns dropped");
+            assert_eq!(line.detections, want.detections, "{topic} message {i}: the .npy's boxes");
+        }
+    }
+}
+
+#[test]
+fn the_scene_mcap_holds_the_clouds_and_the_boxes_of_the_json() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (out, scene) = (tmp.path().join("o"), tmp.path().join("scene.mcap"));
+    ok(&["detect", fixture().to_str().unwrap(), "--topic", "/velodyne_points", "--out", out.to_str().unwrap(), "--mcap", scene.to_str().unwrap(), "--score-threshold", "0.05"]);
+    let bytes = std::fs::read(&scene).unwrap();
+    let (mut clouds, mut updates) = (0, Vec::new());
+    for m in mcap::MessageStream::new(&bytes).unwrap() {
+        let m = m.unwrap();
+        match m.channel.topic.as_str() {
+            "/velodyne_points" => {
+                assert_eq!(m.channel.schema.as_ref().unwrap().name, "sensor_msgs/msg/PointCloud2");
+                clouds += 1;
+            }
+            "/pmunet/people" => {
+                assert_eq!((m.channel.schema.as_ref().unwrap().name.as_str(), m.channel.message_encoding.as_str()), ("foxglove.SceneUpdate", "json"));
+                updates.push(serde_json::from_slice::<serde_json::Value>(&m.data).unwrap());
+            }
+            other => panic!("unexpected topic {other}"),
+        }
+    }
+    assert_eq!((clouds, updates.len()), (2, 2));
+    assert!(updates.iter().all(|u| !u["entities"][0]["cubes"].as_array().unwrap().is_empty()), "boxes to compare");
+    for (i, u) in updates.iter().enumerate() {
+        let want = report(&out.join(format!("json/clouds/{i:06}.json")));
+        let e = &u["entities"][0];
+        assert_eq!(e["frame_id"], "lidar_top");
+        assert_eq!((e["timestamp"]["sec"].as_i64(), e["timestamp"]["nsec"].as_u64()), (Some(1_532_402_927 + i as i64), Some(250_000_000)));
+        let cubes = e["cubes"].as_array().unwrap();
+        assert_eq!(cubes.len(), want.detections.len());
+        for (c, (d, t)) in cubes.iter().zip(want.detections.iter().zip(e["texts"].as_array().unwrap())) {
+            let f = |v: &serde_json::Value| v.as_f64().unwrap();
+            let yaw = 2.0 * f(&c["pose"]["orientation"]["z"]).atan2(f(&c["pose"]["orientation"]["w"]));
+            let got = [f(&c["pose"]["position"]["x"]), f(&c["pose"]["position"]["y"]), f(&c["pose"]["position"]["z"]), f(&c["size"]["x"]), f(&c["size"]["y"]), f(&c["size"]["z"])];
+            assert_eq!(got, [d.x, d.y, d.z, d.l, d.w, d.h]);
+            assert!((yaw - d.yaw).rem_euclid(std::f64::consts::TAU).min((d.yaw - yaw).rem_euclid(std::f64::consts::TAU)) < 1e-9);
+            assert_eq!(t["text"].as_str().unwrap(), format!("{:.2}", d.score));
+        }
+    }
+}
+
+#[test]
+fn what_is_not_a_cloud_topic_or_file_is_named() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mcap = fixture();
+    let m = mcap.to_str().unwrap();
+    let out = tmp.path().join("o");
+    let fail = |args: &[&str]| {
+        let o = train_bin(args);
+        assert!(!o.status.success() || !String::from_utf8_lossy(&o.stderr).is_empty(), "{args:?}");
+        String::from_utf8_lossy(&o.stderr).into_owned()
+    };
+    let e = fail(&["detect", m, "--out", out.to_str().unwrap()]);
+    assert!(e.contains("give --topic") && e.contains("/velodyne_points [sensor_msgs/msg/PointCloud2]"), "{e}");
+    let e = fail(&["detect", m, "--topic", "/camera/info", "--out", out.to_str().unwrap()]);
+    assert!(e.contains("holds std_msgs/msg/String"), "{e}");
+    let e = fail(&["detect", m, "--topic", "/nope", "--out", out.to_str().unwrap()]);
+    assert!(e.contains("no topic `/nope`"), "{e}");
+    // A recording cut short: named, never a panic.
+    let bytes = std::fs::read(&mcap).unwrap();
+    let cut = tmp.path().join("cut.mcap");
+    std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
+    let o = train_bin(&["detect", cut.to_str().unwrap(), "--topic", "/velodyne_points", "--out", out.to_str().unwrap()]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(e.contains("cut.mcap") && !e.contains("panicked"), "{e}");
+    let o = train_bin(&["detect", cut.to_str().unwrap(), "--list-topics"]);
+    assert!(!String::from_utf8_lossy(&o.stderr).contains("panicked"));
+}
