@@ -110,6 +110,30 @@ def main():
     for t in sorted(os.listdir(SEEDS)):
         print(t, sorted(os.listdir(os.path.join(SEEDS, t))))
 
+    # ROS 2 PointCloud2 in CDR, serialized by rosbags (`pip install rosbags`): 16 points in a
+    # Velodyne driver's layout, an organised 4 x 4 one with a NaN, and float64 big-endian.
+    try:
+        import numpy as np
+        from rosbags.typesys import Stores, get_typestore
+        ts = get_typestore(Stores.ROS2_HUMBLE)
+        PC2, PF = ts.types["sensor_msgs/msg/PointCloud2"], ts.types["sensor_msgs/msg/PointField"]
+        Header, Time = ts.types["std_msgs/msg/Header"], ts.types["builtin_interfaces/msg/Time"]
+        def cloud(fields, step, h, w, big, data):
+            m = PC2(header=Header(stamp=Time(sec=1, nanosec=2), frame_id="lidar"), height=h, width=w,
+                    fields=[PF(name=n, offset=o, datatype=t, count=1) for n, o, t in fields],
+                    is_bigendian=big, point_step=step, row_step=step * w, data=np.frombuffer(data, np.uint8), is_dense=False)
+            return bytes(ts.serialize_cdr(m, PC2.__msgtype__))
+        pts = np.arange(48, dtype=np.float32).reshape(16, 3)
+        rec = np.zeros(16, dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("i", "<f4"), ("ring", "<u2"), ("p", "<u2")])
+        rec["x"], rec["y"], rec["z"] = pts.T
+        put("pointcloud2", "velodyne_16.cdr", cloud([("x", 0, 7), ("y", 4, 7), ("z", 8, 7), ("intensity", 12, 7), ("ring", 16, 4)], 20, 1, 16, False, rec.tobytes()))
+        org = pts.copy(); org[5] = np.nan
+        put("pointcloud2", "organised_4x4.cdr", cloud([("x", 0, 7), ("y", 4, 7), ("z", 8, 7)], 12, 4, 4, False, org.tobytes()))
+        be = pts.astype(">f8")[:, [2, 0, 1]]
+        put("pointcloud2", "float64_be_16.cdr", cloud([("z", 0, 8), ("x", 8, 8), ("y", 16, 8)], 24, 1, 16, True, be.tobytes()))
+    except ImportError:
+        print("rosbags or numpy missing: no pointcloud2 seeds (pip install rosbags numpy)")
+
 
 if __name__ == "__main__":
     main()

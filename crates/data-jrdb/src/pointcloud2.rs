@@ -250,6 +250,18 @@ mod tests {
     }
 
     #[test]
+    fn messages_rosbags_serialized_decode() {
+        // fuzz/make_seeds.py writes these with rosbags' CDR serializer (points 0, 1, 2, … 47).
+        let seeds = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz/seeds/pointcloud2");
+        let want: Vec<[f32; 3]> = (0..16).map(|i| [3.0 * i as f32, 3.0 * i as f32 + 1.0, 3.0 * i as f32 + 2.0]).collect();
+        for (file, dropped) in [("velodyne_16.cdr", 0), ("organised_4x4.cdr", 1), ("float64_be_16.cdr", 0)] {
+            let c = decode_cdr(&std::fs::read(seeds.join(file)).unwrap(), &ReadLimits::NONE).unwrap();
+            let expect: Vec<[f32; 3]> = want.iter().enumerate().filter(|&(i, _)| dropped == 0 || i != 5).map(|(_, p)| *p).collect();
+            assert_eq!((c.points, c.dropped_non_finite, c.frame_id.as_str(), c.stamp), (expect, dropped, "lidar", Stamp { sec: 1, nanosec: 2 }), "{file}");
+        }
+    }
+
+    #[test]
     fn bad_messages_say_what_is_wrong() {
         let data = vec![0u8; 36];
         let bad = |m: Vec<u8>| decode_cdr(&m, &ReadLimits::NONE).unwrap_err().to_string();
