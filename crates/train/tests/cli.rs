@@ -1,9 +1,12 @@
 //! End to end through the binary (as users run it): data generation, training, validation,
 //! checkpoints, plots, inference and scoring; and resume against an uninterrupted run.
 
+mod common;
+
 use std::path::Path;
 use std::process::Command;
 
+use common::{metrics_without_times, ok as train_bin, results_without_times};
 use train::metrics::Table;
 
 fn tiny_config(dir: &Path, data: &Path, extra: &str) -> std::path::PathBuf {
@@ -43,13 +46,6 @@ frame_stride = 2
     p
 }
 
-fn train_bin(args: &[&str]) -> std::process::Output {
-    let out = Command::new(env!("CARGO_BIN_EXE_train")).args(args).env("NO_COLOR", "1").output().expect("runs");
-    if !out.status.success() {
-        panic!("train {args:?} failed:\n{}\n{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
-    }
-    out
-}
 
 #[test]
 fn smoke_generate_train_validate_checkpoint_infer() {
@@ -204,17 +200,10 @@ fn a_sweep_run_two_at_a_time_gives_the_local_sweeps_tables() {
     let runs = tmp.path().join("runs");
     for v in ["a", "b"] {
         assert!(runs.join(format!("parallel/{v}/seed-0.log")).is_file(), "each run's log beside its folder");
-        let metrics = |s: &str| -> Vec<String> {
-            // Every column but the wall-clock ones.
-            std::fs::read_to_string(runs.join(format!("{s}/{v}/seed-0/metrics.csv"))).unwrap().lines().map(|l| l.rsplitn(3, ',').nth(2).unwrap().to_string()).collect()
-        };
+        let metrics = |s: &str| metrics_without_times(&runs.join(format!("{s}/{v}/seed-0")));
         assert_eq!(metrics("local"), metrics("parallel"), "variant {v}");
     }
-    let table = |s: &str| -> Vec<String> {
-        let csv = std::fs::read_to_string(runs.join(format!("{s}/results.csv"))).unwrap();
-        let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
-        csv.lines().map(|l| l.split(',').zip(&header).filter(|(_, h)| !h.contains("seconds") && !h.contains("minutes")).map(|(c, _)| c.to_string()).collect::<Vec<_>>().join(",")).collect()
-    };
+    let table = |s: &str| results_without_times(&runs.join(s));
     assert_eq!(table("local"), table("parallel"));
     // Submitting again skips the finished runs.
     let again = train_bin(&["sweep", parallel.to_str().unwrap(), "--jobs", "2"]);

@@ -5,6 +5,8 @@
 //! others still written; the service under concurrent clients answers every valid body with
 //! `detect`'s boxes, every malformed one with a 4xx, and stays healthy.
 
+mod common;
+
 use std::collections::BTreeMap;
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::TcpStream;
@@ -16,24 +18,11 @@ use data_jrdb::pcd::{Column, Encoding, FieldType, encode_pcd};
 use data_jrdb::sim::{SynthConfig, synth};
 use data_jrdb::{DatasetConfig, JrdbDataset, Split, encode_npy};
 use eval::jrdb::read_detections;
+use common::{ok, report, train_bin};
 use train::{BoxRecord, FrameReport};
 
 fn weights() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../weights/person_minkunet")
-}
-
-fn train_bin(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_train")).args(args).env("NO_COLOR", "1").output().expect("runs")
-}
-
-fn ok(args: &[&str]) -> std::process::Output {
-    let out = train_bin(args);
-    assert!(out.status.success(), "train {args:?} failed:\n{}\n{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
-    out
-}
-
-fn report(path: &Path) -> FrameReport {
-    serde_json::from_str(&std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))).unwrap()
 }
 
 /// A small simulated tree and its frames merged into the base frame.

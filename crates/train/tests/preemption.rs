@@ -5,9 +5,13 @@
 //! writes the local sweep's tables.
 #![cfg(unix)]
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
+
+use common::{metrics_without_times, ok, results_without_times};
 
 fn config(dir: &Path, data: &Path) -> PathBuf {
     let text = format!(
@@ -46,17 +50,6 @@ frame_stride = 3
     path
 }
 
-fn train_bin(args: &[&str]) -> std::process::Output {
-    let out = Command::new(env!("CARGO_BIN_EXE_train")).args(args).env("NO_COLOR", "1").output().expect("runs");
-    assert!(out.status.success(), "train {args:?} failed:\n{}\n{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
-    out
-}
-
-/// Every metrics.csv row without its wall-clock columns (the last two).
-fn metrics(run: &Path) -> Vec<String> {
-    std::fs::read_to_string(run.join("metrics.csv")).unwrap().lines().map(|l| l.rsplitn(3, ',').nth(2).unwrap().to_string()).collect()
-}
-
 fn rows(run: &Path) -> usize {
     std::fs::read_to_string(run.join("metrics.csv")).map_or(0, |t| t.lines().count().saturating_sub(1))
 }
@@ -75,7 +68,7 @@ fn a_run_sent_sigterm_checkpoints_and_resumes_to_the_same_metrics() {
     let cfg = config(tmp.path(), &tmp.path().join("data"));
     let runs = tmp.path().join("runs");
     let (cfg_s, runs_s) = (cfg.to_str().unwrap(), runs.to_str().unwrap());
-    train_bin(&["--config", cfg_s, "--out", runs_s, "--name", "whole", "--quiet"]);
+    ok(&["--config", cfg_s, "--out", runs_s, "--name", "whole", "--quiet"]);
     let mut child = Command::new(env!("CARGO_BIN_EXE_train")).args(["--config", cfg_s, "--out", runs_s, "--name", "cut", "--quiet"]).spawn().unwrap();
     let cut = runs.join("cut");
     wait_for("a few steps", Duration::from_secs(300), || rows(&cut) >= 3);
@@ -87,8 +80,8 @@ fn a_run_sent_sigterm_checkpoints_and_resumes_to_the_same_metrics() {
     assert!(summary.contains("\"finished\": false"), "{summary}");
     let stopped_at = rows(&cut);
     assert!(stopped_at < rows(&runs.join("whole")), "the signal came before the end ({stopped_at} steps)");
-    train_bin(&["--config", cfg_s, "--out", runs_s, "--name", "cut", "--resume", "--quiet"]);
-    assert_eq!(metrics(&cut), metrics(&runs.join("whole")));
+    ok(&["--config", cfg_s, "--out", runs_s, "--name", "cut", "--resume", "--quiet"]);
+    assert_eq!(metrics_without_times(&cut), metrics_without_times(&runs.join("whole")));
     // Its validation too: the checkpoint held the batch norms' running statistics of its last step.
     let scored = |run: &Path| -> Vec<String> {
         std::fs::read_to_string(run.join("summary.json")).unwrap().lines().filter(|l| !l.contains("\"name\"") && !l.contains("seconds")).map(str::to_string).collect()
@@ -119,8 +112,8 @@ fn a_sweep_on_slurm_with_a_requeued_task_writes_the_local_sweeps_tables() {
         path
     };
     let (local, cluster) = (sweep("local"), sweep("slurm"));
-    train_bin(&["sweep", local.to_str().unwrap()]);
-    let out = train_bin(&["sweep", cluster.to_str().unwrap(), "--slurm", "--cpus-per-task", "1", "--time", "10"]);
+    ok(&["sweep", local.to_str().unwrap()]);
+    let out = ok(&["sweep", cluster.to_str().unwrap(), "--slurm", "--cpus-per-task", "1", "--time", "10"]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("submitted 4 runs as job array"), "{err}");
     let sdir = tmp.path().join("runs").join(format!("slurm{name}"));
@@ -132,7 +125,7 @@ fn a_sweep_on_slurm_with_a_requeued_task_writes_the_local_sweeps_tables() {
     let rq = Command::new("scontrol").args(["requeue", &format!("{job}_0")]).output().unwrap();
     assert!(rq.status.success(), "scontrol requeue: {}", String::from_utf8_lossy(&rq.stderr));
     // Resubmitting while tasks are queued submits nothing again.
-    let again = train_bin(&["sweep", cluster.to_str().unwrap(), "--slurm"]);
+    let again = ok(&["sweep", cluster.to_str().unwrap(), "--slurm"]);
     let again = String::from_utf8_lossy(&again.stderr);
     assert!(again.contains("nothing to submit") && again.matches("not submitted again").count() == 4, "{again}");
     wait_for("the array and the tables job", Duration::from_secs(900), || {
@@ -141,16 +134,11 @@ fn a_sweep_on_slurm_with_a_requeued_task_writes_the_local_sweeps_tables() {
     });
     let log = std::fs::read_to_string(first.with_extension("log")).unwrap();
     assert!(log.contains("restart 1") && log.contains("stopped by a signal"), "task 0 was requeued and resumed:\n{log}");
-    let status = train_bin(&["sweep", cluster.to_str().unwrap(), "--status"]);
+    let status = ok(&["sweep", cluster.to_str().unwrap(), "--status"]);
     assert_eq!(String::from_utf8_lossy(&status.stdout).matches(": finished (").count(), 4, "{}", String::from_utf8_lossy(&status.stdout));
     for v in ["a/seed-0", "a/seed-1", "b/seed-0", "b/seed-1"] {
         let l = tmp.path().join("runs").join(format!("local{name}")).join(v);
-        assert_eq!(metrics(&sdir.join(v)), metrics(&l), "{v}");
+        assert_eq!(metrics_without_times(&sdir.join(v)), metrics_without_times(&l), "{v}");
     }
-    let table = |dir: &Path| -> Vec<String> {
-        let csv = std::fs::read_to_string(dir.join("results.csv")).unwrap();
-        let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
-        csv.lines().map(|l| l.split(',').zip(&header).filter(|(_, h)| !h.contains("seconds") && !h.contains("minutes")).map(|(c, _)| c.to_string()).collect::<Vec<_>>().join(",")).collect()
-    };
-    assert_eq!(table(&sdir), table(&tmp.path().join("runs").join(format!("local{name}"))));
+    assert_eq!(results_without_times(&sdir), results_without_times(&tmp.path().join("runs").join(format!("local{name}"))));
 }

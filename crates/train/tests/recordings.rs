@@ -5,9 +5,11 @@
 //! points as an `.npy`, with its stamp and frame id; topics are listed; a topic that holds no
 //! clouds, a missing `--topic` and a damaged file are named, never a panic.
 
-use std::path::{Path, PathBuf};
-use std::process::Command;
+mod common;
 
+use std::path::{Path, PathBuf};
+
+use common::{ok, report, train_bin};
 use data_jrdb::encode_npy;
 use train::FrameReport;
 
@@ -17,20 +19,6 @@ fn root() -> PathBuf {
 
 fn fixture() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/recordings/clouds.mcap")
-}
-
-fn train_bin(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_train")).args(args).env("NO_COLOR", "1").output().expect("runs")
-}
-
-fn ok(args: &[&str]) -> std::process::Output {
-    let out = train_bin(args);
-    assert!(out.status.success(), "train {args:?} failed:\n{}\n{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
-    out
-}
-
-fn report(path: &Path) -> FrameReport {
-    serde_json::from_str(&std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))).unwrap()
 }
 
 /// The fixture's points: every 4th point of the real nuScenes scan, as the script took them.

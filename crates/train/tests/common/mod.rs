@@ -2,6 +2,7 @@
 #![allow(dead_code)]
 
 use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
 
 use data_jrdb::sim::{SynthConfig, synth};
 use train::RunDir;
@@ -31,4 +32,33 @@ pub fn tree_and_shipped_run(dir: &Path, sim: SynthConfig) -> (PathBuf, RunDir) {
     let root = dir.join("sim");
     synth(&root, &sim).unwrap();
     (root, shipped_copy(&dir.join("run")))
+}
+
+/// The `train` binary run with `args` (colours off), whatever its outcome.
+pub fn train_bin(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_train")).args(args).env("NO_COLOR", "1").output().expect("runs")
+}
+
+/// [`train_bin`], which must succeed (its output is shown when it does not).
+pub fn ok(args: &[&str]) -> Output {
+    let out = train_bin(args);
+    assert!(out.status.success(), "train {args:?} failed:\n{}\n{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    out
+}
+
+/// A `FrameReport` JSON file `detect` wrote.
+pub fn report(path: &Path) -> train::FrameReport {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))).unwrap()
+}
+
+/// A run's `metrics.csv` rows without their wall-clock columns (the last two).
+pub fn metrics_without_times(run: &Path) -> Vec<String> {
+    std::fs::read_to_string(run.join("metrics.csv")).unwrap().lines().map(|l| l.rsplitn(3, ',').nth(2).unwrap().to_string()).collect()
+}
+
+/// A sweep's `results.csv` without its time columns.
+pub fn results_without_times(sweep_dir: &Path) -> Vec<String> {
+    let csv = std::fs::read_to_string(sweep_dir.join("results.csv")).unwrap();
+    let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
+    csv.lines().map(|l| l.split(',').zip(&header).filter(|(_, h)| !h.contains("seconds") && !h.contains("minutes")).map(|(c, _)| c.to_string()).collect::<Vec<_>>().join(",")).collect()
 }
