@@ -51,6 +51,8 @@ pub struct Sample {
     pub boxes: Vec<Box3d>,
     /// `num_points` of each box (evaluation filters on it).
     pub num_points: Vec<i64>,
+    /// Boxes the evaluator ignores, transformed like the points (not trained on).
+    pub ignored: Vec<Box3d>,
     /// Points in the frame before voxelization (inside the volume).
     pub n_points: usize,
     /// Points dropped for lying outside the volume.
@@ -68,6 +70,7 @@ pub fn prepare<R: Rng + ?Sized>(mut frame: Frame, cfg: &SampleConfig, rng: &mut 
         let t = Augmentation::sample(&a, rng);
         t.apply_points(&mut frame.points);
         frame.boxes = frame.boxes.iter().map(|b| t.apply_box(b)).collect();
+        frame.ignored = frame.ignored.iter().map(|b| t.apply_box(b)).collect();
         t
     });
     let mut voxels = voxelize(&frame.points, &cfg.voxel);
@@ -80,6 +83,7 @@ pub fn prepare<R: Rng + ?Sized>(mut frame: Frame, cfg: &SampleConfig, rng: &mut 
         voxels,
         boxes: frame.boxes,
         num_points: frame.num_points,
+        ignored: frame.ignored,
         n_points: frame.points.len(),
         dropped_out_of_volume,
         points: if cfg.keep_points { frame.points } else { Vec::new() },
@@ -102,6 +106,8 @@ pub struct Batch {
     pub boxes: Vec<Vec<Box3d>>,
     /// `num_points` of each box of each sample.
     pub num_points: Vec<Vec<i64>>,
+    /// Each sample's boxes the evaluator ignores.
+    pub ignored: Vec<Vec<Box3d>>,
     /// `(sequence, frame name)` of each sample.
     pub frames: Vec<(String, String)>,
     /// Voxel size used, metres.
@@ -167,6 +173,7 @@ pub fn collate(samples: Vec<Sample>, voxel_size: [f32; 3]) -> Batch {
         b.offsets.push(b.coords.len());
         b.boxes.push(s.boxes);
         b.num_points.push(s.num_points);
+        b.ignored.push(s.ignored);
         b.frames.push((s.sequence, s.name));
         b.clouds.push(s.points);
     }

@@ -7,7 +7,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::augment::AugmentConfig;
 use crate::batch::SampleConfig;
-use crate::dataset::{DatasetConfig, OnBadFrame};
+use crate::dataset::{DatasetConfig, DatasetFormat, OnBadFrame};
+use crate::kitti::KittiOptions;
+use crate::nuscenes::NuscenesOptions;
 use crate::pcd::NonFinite;
 use crate::sim::SimulateConfig;
 use crate::split::{DEFAULT_VAL_SEQUENCES, Split};
@@ -18,9 +20,18 @@ use crate::voxelize::{Pooling, VoxelConfig};
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct DataConfig {
-    /// JRDB-format tree (a plain root or a folder holding `train_dataset_with_activity/`).
+    /// The dataset's layout: `jrdb` (default), `kitti` or `nuscenes` (docs/data.md).
+    pub format: DatasetFormat,
+    /// The dataset: a JRDB-format tree (a plain root or a folder holding
+    /// `train_dataset_with_activity/`), a KITTI object root or a nuScenes-style root.
     /// A relative path is relative to the working directory.
     pub root: PathBuf,
+    /// KITTI's settings (`format = "kitti"`).
+    #[serde(skip_serializing_if = "is_default")]
+    pub kitti: KittiOptions,
+    /// nuScenes' settings (`format = "nuscenes"`).
+    #[serde(skip_serializing_if = "is_default")]
+    pub nuscenes: NuscenesOptions,
     /// If present and `root` does not exist, a simulated tree is generated there first.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub simulate: Option<SimulateConfig>,
@@ -69,7 +80,10 @@ pub struct ExtraTree {
 impl Default for DataConfig {
     fn default() -> Self {
         Self {
+            format: DatasetFormat::Jrdb,
             root: PathBuf::from("data/jrdb"),
+            kitti: KittiOptions::default(),
+            nuscenes: NuscenesOptions::default(),
             simulate: None,
             train_split: Split::Train,
             val_split: Split::Val,
@@ -113,6 +127,9 @@ impl DataConfig {
     /// non-finite points dropped.
     pub fn dataset(&self, split: Split) -> DatasetConfig {
         DatasetConfig {
+            format: self.format,
+            kitti: self.kitti,
+            nuscenes: self.nuscenes.clone(),
             split,
             val_sequences: self.val_sequences.clone(),
             sequences: None,
@@ -121,6 +138,10 @@ impl DataConfig {
             require_labels: true,
         }
     }
+}
+
+fn is_default<T: Default + PartialEq>(v: &T) -> bool {
+    *v == T::default()
 }
 
 /// Training augmentation: `p ↦ s·R(α)·p`, `s ~ U(scale)`, `α ~ U(0, 2π)` (the authors').

@@ -6,7 +6,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::box3d::Box3d;
-use crate::dataset::JrdbDataset;
+use crate::dataset::Dataset;
 use crate::error::Result;
 
 /// The box readings compared.
@@ -32,7 +32,7 @@ fn variants(b: &Box3d) -> [Box3d; 3] {
 }
 
 /// Checks every `stride`-th frame of the dataset.
-pub fn check(ds: &JrdbDataset, stride: usize) -> Result<Vec<Agreement>> {
+pub fn check(ds: &Dataset, stride: usize) -> Result<Vec<Agreement>> {
     let diffs: Vec<Vec<([i64; 3], i64)>> = (0..ds.len())
         .step_by(stride.max(1))
         .collect::<Vec<_>>()

@@ -1,13 +1,41 @@
-//! `JrdbDataset`: the frames of a split, and `Frame`, one merged scan with its boxes.
+//! `Dataset`: the frames of a split of a dataset in any of the layouts read (JRDB, KITTI object,
+//! nuScenes-style tables), and `Frame`, one scan in the base frame with its boxes.
 
 use std::path::{Path, PathBuf};
 
 use crate::box3d::Box3d;
 use crate::calibration::{Calibration, Lidar};
+use crate::cloud::read_cloud;
 use crate::error::{DataError, ErrorKind, Result};
+use crate::kitti::{CameraView, KittiOptions};
 use crate::labels::{Label, read_labels};
+use crate::nuscenes::NuscenesOptions;
 use crate::pcd::{NonFinite, read_pcd};
+use crate::rigid::Rigid;
 use crate::split::{DEFAULT_VAL_SEQUENCES, Layout, Split, select_sequences};
+
+/// The layout a dataset's files are in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "snake_case")]
+pub enum DatasetFormat {
+    /// A JRDB tree: two Velodynes' PCDs per frame, `labels_3d` JSON, `defaults.yaml`.
+    #[default]
+    Jrdb,
+    /// KITTI object: `velodyne/*.bin`, `label_2/*.txt`, `calib/*.txt`, `ImageSets/*.txt`.
+    Kitti,
+    /// nuScenes-style tables (nuScenes v1.0, Lyft level 5): JSON tables and LIDAR_TOP `.pcd.bin`.
+    Nuscenes,
+}
+
+impl std::fmt::Display for DatasetFormat {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            DatasetFormat::Jrdb => "jrdb",
+            DatasetFormat::Kitti => "kitti",
+            DatasetFormat::Nuscenes => "nuscenes",
+        })
+    }
+}
 
 /// What to do with a frame whose files are malformed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
@@ -24,6 +52,12 @@ pub enum OnBadFrame {
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default)]
 pub struct DatasetConfig {
+    /// The files' layout.
+    pub format: DatasetFormat,
+    /// KITTI's settings (read when `format` is `kitti`).
+    pub kitti: KittiOptions,
+    /// nuScenes' settings (read when `format` is `nuscenes`).
+    pub nuscenes: NuscenesOptions,
     /// Split to use.
     pub split: Split,
     /// Validation sequences (default: JRDB's 7).
@@ -41,6 +75,9 @@ pub struct DatasetConfig {
 impl Default for DatasetConfig {
     fn default() -> Self {
         Self {
+            format: DatasetFormat::Jrdb,
+            kitti: KittiOptions::default(),
+            nuscenes: NuscenesOptions::default(),
             split: Split::Train,
             val_sequences: DEFAULT_VAL_SEQUENCES.map(String::from).to_vec(),
             sequences: None,
@@ -51,6 +88,28 @@ impl Default for DatasetConfig {
     }
 }
 
+/// Where a frame's points come from and how they reach the base frame.
+#[derive(Debug, Clone, PartialEq)]
+pub enum FrameSource {
+    /// JRDB: the two Velodynes' PCDs, merged `[upper, lower]` by the tree's calibration.
+    Jrdb {
+        /// Upper cloud file.
+        upper: PathBuf,
+        /// Lower cloud file.
+        lower: PathBuf,
+    },
+    /// One cloud file (KITTI `.bin`, nuScenes `.pcd.bin`) moved into the base frame, and kept
+    /// only where a camera sees when the dataset labels only its view.
+    Cloud {
+        /// The file.
+        path: PathBuf,
+        /// Its sensor frame → the base frame.
+        to_base: Rigid,
+        /// The camera whose view alone is labelled (KITTI), if the points are cropped to it.
+        view: Option<CameraView>,
+    },
+}
+
 /// Where a frame's files are and its labels (read once when the dataset opens).
 #[derive(Debug, Clone, PartialEq)]
 pub struct FrameRef {
@@ -58,12 +117,26 @@ pub struct FrameRef {
     pub sequence: String,
     /// Frame name without extension (`000123`).
     pub name: String,
-    /// Upper cloud file.
-    pub upper: PathBuf,
-    /// Lower cloud file.
-    pub lower: PathBuf,
-    /// Its pedestrian labels (empty when the frame has none).
+    /// Where its points are.
+    pub source: FrameSource,
+    /// Its pedestrian labels in the base frame (empty when the frame has none).
     pub labels: Vec<Label>,
+    /// Boxes of objects that are neither people nor background to the evaluator (KITTI's
+    /// `Cyclist`, nuScenes' strollers and wheelchairs): a detection on one counts neither way.
+    pub ignored: Vec<Box3d>,
+    /// Whether the labels' `num_points` is counted from the cloud when the frame loads (the
+    /// format does not state it).
+    pub count_points: bool,
+}
+
+impl FrameRef {
+    /// The cloud files it reads (JRDB: upper, then lower).
+    pub fn cloud_files(&self) -> Vec<&Path> {
+        match &self.source {
+            FrameSource::Jrdb { upper, lower } => vec![upper, lower],
+            FrameSource::Cloud { path, .. } => vec![path],
+        }
+    }
 }
 
 /// One merged scan in the base frame with its pedestrian boxes.
@@ -85,15 +158,19 @@ pub struct Frame {
     pub num_points: Vec<i64>,
     /// `label_id` of each box.
     pub label_ids: Vec<String>,
+    /// Boxes the evaluator ignores (see [`FrameRef::ignored`]); not trained on as people.
+    pub ignored: Vec<Box3d>,
 }
 
-/// The frames of one split of a JRDB-format tree.
+/// The frames of one split of a dataset.
 #[derive(Debug, Clone)]
-pub struct JrdbDataset {
-    /// The resolved layout.
-    pub layout: Layout,
-    /// LiDAR → base transforms.
-    pub calibration: Calibration,
+pub struct Dataset {
+    /// The folder the frames were found in (a JRDB tree's resolved root).
+    pub root: PathBuf,
+    /// The files' layout.
+    pub format: DatasetFormat,
+    /// A JRDB tree's LiDAR → base transforms (`None` for the other layouts).
+    pub calibration: Option<Calibration>,
     /// Frames in sequence order, then file-name order.
     pub frames: Vec<FrameRef>,
     /// The sequences used, sorted.
@@ -106,20 +183,33 @@ fn warn(e: &DataError) {
     eprintln!("warning: skipping: {e}");
 }
 
-impl JrdbDataset {
-    /// Appends another tree's frames (trained on together); both must share one calibration,
-    /// which merges every frame's two clouds.
-    pub fn append(&mut self, other: JrdbDataset) -> Result<()> {
-        if other.calibration != self.calibration {
-            return Err(DataError::new(other.layout.calibration_file(), ErrorKind::Mismatch(format!("calibration differs from {}'s; trees trained on together must share one", self.layout.root.display()))));
+impl Dataset {
+    /// Appends another dataset's frames (trained on together); two JRDB trees must share one
+    /// calibration, which merges every frame's two clouds.
+    pub fn append(&mut self, other: Dataset) -> Result<()> {
+        if let (Some(a), Some(b)) = (self.calibration, other.calibration)
+            && a != b
+        {
+            return Err(DataError::new(Layout { root: other.root.clone() }.calibration_file(), ErrorKind::Mismatch(format!("calibration differs from {}'s; trees trained on together must share one", self.root.display()))));
         }
+        self.calibration = self.calibration.or(other.calibration);
         self.frames.extend(other.frames);
         self.sequences.extend(other.sequences);
         Ok(())
     }
 
-    /// Opens a tree (a plain root or one holding `train_dataset_with_activity/`) and lists its frames.
+    /// Opens a dataset in `cfg.format` and lists the frames of `cfg.split`.
     pub fn open(dir: &Path, cfg: &DatasetConfig) -> Result<Self> {
+        let (frames, sequences) = match cfg.format {
+            DatasetFormat::Jrdb => return Self::open_jrdb(dir, cfg),
+            DatasetFormat::Kitti => crate::kitti::list_frames(dir, cfg)?,
+            DatasetFormat::Nuscenes => crate::nuscenes::list_frames(dir, cfg)?,
+        };
+        Ok(Self { root: dir.to_path_buf(), format: cfg.format, calibration: None, frames, sequences, non_finite: cfg.non_finite })
+    }
+
+    /// A JRDB tree (a plain root or one holding `train_dataset_with_activity/`).
+    fn open_jrdb(dir: &Path, cfg: &DatasetConfig) -> Result<Self> {
         let layout = Layout::resolve(dir)?;
         let calibration = Calibration::read(&layout.calibration_file())?;
         let present = layout.sequences()?;
@@ -135,7 +225,7 @@ impl JrdbDataset {
                 Err(e) => return Err(e),
             }
         }
-        Ok(Self { layout, calibration, frames, sequences, non_finite: cfg.non_finite })
+        Ok(Self { root: layout.root, format: DatasetFormat::Jrdb, calibration: Some(calibration), frames, sequences, non_finite: cfg.non_finite })
     }
 
     /// Number of frames.
@@ -148,24 +238,45 @@ impl JrdbDataset {
         self.frames.is_empty()
     }
 
-    /// Reads frame `i`: both clouds into the base frame, merged as `[upper, lower]`.
+    /// Reads frame `i` into the base frame (a JRDB frame's two clouds merged `[upper, lower]`).
     pub fn load(&self, i: usize) -> Result<Frame> {
         let r = &self.frames[i];
-        let up = read_pcd(&r.upper, self.non_finite)?;
-        let lo = read_pcd(&r.lower, self.non_finite)?;
-        let (tu, tl) = (self.calibration.lidar(Lidar::Upper), self.calibration.lidar(Lidar::Lower));
-        let mut points = Vec::with_capacity(up.xyz.len() + lo.xyz.len());
-        points.extend(up.xyz.iter().map(|&p| tu.to_base(p)));
-        points.extend(lo.xyz.iter().map(|&p| tl.to_base(p)));
+        let (points, n_upper, dropped_non_finite) = match &r.source {
+            FrameSource::Jrdb { upper, lower } => {
+                let calibration = self.calibration.unwrap_or_default();
+                let up = read_pcd(upper, self.non_finite)?;
+                let lo = read_pcd(lower, self.non_finite)?;
+                let (tu, tl) = (calibration.lidar(Lidar::Upper), calibration.lidar(Lidar::Lower));
+                let mut points = Vec::with_capacity(up.xyz.len() + lo.xyz.len());
+                points.extend(up.xyz.iter().map(|&p| tu.to_base(p)));
+                points.extend(lo.xyz.iter().map(|&p| tl.to_base(p)));
+                (points, up.xyz.len(), up.dropped_non_finite + lo.dropped_non_finite)
+            }
+            FrameSource::Cloud { path, to_base, view } => {
+                let cloud = read_cloud(path)?;
+                let mut points: Vec<[f32; 3]> = cloud.points.iter().map(|&p| to_base.apply_f32(p)).collect();
+                if let Some(view) = view {
+                    points.retain(|&p| view.sees(p));
+                }
+                let n = points.len();
+                (points, n, cloud.dropped_non_finite)
+            }
+        };
+        let num_points = if r.count_points {
+            r.labels.iter().map(|l| l.bbox.count_inside(&points) as i64).collect()
+        } else {
+            r.labels.iter().map(|l| l.num_points).collect()
+        };
         Ok(Frame {
             sequence: r.sequence.clone(),
             name: r.name.clone(),
-            n_upper: up.xyz.len(),
+            n_upper,
             points,
-            dropped_non_finite: up.dropped_non_finite + lo.dropped_non_finite,
+            dropped_non_finite,
             boxes: r.labels.iter().map(|l| l.bbox).collect(),
-            num_points: r.labels.iter().map(|l| l.num_points).collect(),
+            num_points,
             label_ids: r.labels.iter().map(|l| l.id.clone()).collect(),
+            ignored: r.ignored.clone(),
         })
     }
 }
@@ -209,7 +320,7 @@ fn list_sequence(layout: &Layout, seq: &str, cfg: &DatasetConfig) -> Result<Vec<
             return Err(e);
         }
         let labels = labels.remove(&format!("{name}.pcd")).unwrap_or_default();
-        out.push(FrameRef { sequence: seq.to_string(), name, upper, lower, labels });
+        out.push(FrameRef { sequence: seq.to_string(), name, source: FrameSource::Jrdb { upper, lower }, labels, ignored: Vec::new(), count_points: false });
     }
     Ok(out)
 }

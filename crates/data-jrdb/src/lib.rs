@@ -1,9 +1,11 @@
-//! JRDB data: the box type of the workspace, readers for the JRDB layout, batching, and a
-//! simulator that writes JRDB-format trees.
+//! Data: the box type of the workspace, readers for the JRDB, KITTI object and nuScenes-style
+//! layouts, batching, and a simulator that writes JRDB-format trees.
 //!
 //! Crate map:
 //! - files: [`pcd`] (+ [`lzf`]), [`cloud`] (PCD, KITTI `.bin`, nuScenes `.pcd.bin`, `.npy` for detection), [`labels`], [`calibration`], [`timestamps`], [`split`] (layout and
-//!   splits), [`dataset`] (`JrdbDataset`, `Frame`);
+//!   splits);
+//! - datasets: [`dataset`] (`Dataset`, `Frame`) over JRDB trees, [`kitti`] and [`nuscenes`],
+//!   their frames moved by [`rigid`]; [`export`] writes one in the others' layouts;
 //! - settings: [`config`] (`DataConfig`, the `[data]` table a run embeds);
 //! - batches: [`volume`] → [`augment`] → [`voxelize`] → [`batch`] (`Sample`, `Batch`), driven by [`loader`];
 //! - checks: [`stats`], [`convention`];
@@ -22,6 +24,14 @@ pub mod box3d;
 pub mod calibration;
 /// The `[data]` settings of a run.
 pub mod config;
+/// A dataset written in KITTI's or nuScenes' layout.
+pub mod export;
+/// KITTI object's layout: calibration, labels, the camera's view.
+pub mod kitti;
+/// nuScenes-style tables.
+pub mod nuscenes;
+/// Rigid transforms between the datasets' frames.
+pub mod rigid;
 /// The box-convention check against `num_points`.
 pub mod convention;
 /// A split of a JRDB tree and its frames.
@@ -59,7 +69,10 @@ pub use box3d::Box3d;
 pub use calibration::{Calibration, Lidar};
 pub use cloud::{Cloud, CloudFormat, FORMATS, FormatInfo, ReadLimits, encode_npy, parse_cloud, parse_cloud_within, read_cloud};
 pub use config::{AugmentSection, DataConfig, ExtraTree};
-pub use dataset::{DatasetConfig, Frame, JrdbDataset, OnBadFrame};
+pub use dataset::{Dataset, DatasetConfig, DatasetFormat, Frame, OnBadFrame};
+pub use kitti::KittiOptions;
+pub use nuscenes::NuscenesOptions;
+pub use rigid::Rigid;
 pub use error::{DataError, ErrorKind, Result};
 pub use labels::Label;
 pub use loader::{Batches, Loader, LoaderConfig};

@@ -12,7 +12,7 @@ use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
 
 use crate::batch::{Batch, SampleConfig, collate, prepare};
-use crate::dataset::{JrdbDataset, OnBadFrame};
+use crate::dataset::{Dataset, OnBadFrame};
 use crate::error::DataError;
 
 /// Batching settings.
@@ -44,7 +44,7 @@ impl Default for LoaderConfig {
 /// Turns a dataset into batches, epoch by epoch.
 #[derive(Debug, Clone)]
 pub struct Loader {
-    dataset: Arc<JrdbDataset>,
+    dataset: Arc<Dataset>,
     cfg: LoaderConfig,
 }
 
@@ -58,13 +58,13 @@ fn mix(a: u64, b: u64) -> u64 {
 
 impl Loader {
     /// A loader over `dataset`.
-    pub fn new(dataset: Arc<JrdbDataset>, cfg: LoaderConfig) -> Self {
+    pub fn new(dataset: Arc<Dataset>, cfg: LoaderConfig) -> Self {
         assert!(cfg.batch_size > 0, "batch_size must be positive");
         Self { dataset, cfg }
     }
 
     /// The dataset.
-    pub fn dataset(&self) -> &JrdbDataset {
+    pub fn dataset(&self) -> &Dataset {
         &self.dataset
     }
 
@@ -119,7 +119,7 @@ impl Loader {
     }
 }
 
-fn make_batch(ds: &JrdbDataset, cfg: &LoaderConfig, epoch: u64, frames: &[usize]) -> Result<Batch, DataError> {
+fn make_batch(ds: &Dataset, cfg: &LoaderConfig, epoch: u64, frames: &[usize]) -> Result<Batch, DataError> {
     let mut samples = Vec::with_capacity(frames.len());
     for &i in frames {
         match ds.load(i) {

@@ -1,4 +1,5 @@
-//! `data-jrdb`: make a simulated JRDB-format tree, and look at any JRDB tree.
+//! `data-jrdb`: make a simulated JRDB-format tree, look at any dataset, export one to KITTI's or
+//! nuScenes' layout.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -6,10 +7,11 @@ use std::time::Instant;
 
 use clap::{Parser, Subcommand};
 use data_jrdb::sim::{Preset, SynthConfig, World, synth};
-use data_jrdb::{DatasetConfig, Encoding, JrdbDataset, Split, VoxelConfig, convention, stats};
+use data_jrdb::split::DEFAULT_VAL_SEQUENCES;
+use data_jrdb::{Dataset, DatasetConfig, DatasetFormat, Encoding, Split, VoxelConfig, convention, export, stats};
 
 #[derive(Parser)]
-#[command(name = "data-jrdb", about = "JRDB-format data: simulate a tree, print statistics, check boxes")]
+#[command(name = "data-jrdb", about = "Datasets: simulate a JRDB-format tree, print statistics, check boxes, export to KITTI or nuScenes")]
 struct Cli {
     #[command(subcommand)]
     cmd: Cmd,
@@ -62,17 +64,36 @@ enum Cmd {
         #[arg(long, value_name = "DIR")]
         backdrops: Option<PathBuf>,
     },
-    /// Print frames, points, voxels and boxes per frame and points per box of a tree.
+    /// Print frames, points, voxels and boxes per frame and points per box of a dataset.
     Stats {
-        /// The tree (a plain root or a folder holding train_dataset_with_activity/).
+        /// The dataset (a JRDB tree, a KITTI object root, a nuScenes-style root).
         #[arg(long)]
         root: PathBuf,
+        /// Its layout.
+        #[arg(long, value_enum, default_value_t = DatasetFormat::Jrdb)]
+        format: DatasetFormat,
         /// Print one JSON object instead of a table.
         #[arg(long)]
         json: bool,
-        /// Only these sequences (comma-separated); default all.
+        /// Only these sequences (nuScenes: scenes), comma-separated; default all.
         #[arg(long, value_delimiter = ',')]
         sequences: Option<Vec<String>>,
+    },
+    /// Write a JRDB-format tree in KITTI object's or nuScenes' layout (the same frames and boxes).
+    Export {
+        /// The JRDB-format tree.
+        #[arg(long)]
+        root: PathBuf,
+        /// A new folder to write.
+        #[arg(long)]
+        out: PathBuf,
+        /// The layout to write.
+        #[arg(long, value_enum)]
+        to: DatasetFormat,
+        /// The validation sequences (`*` matches by prefix): KITTI's ImageSets/val.txt; nuScenes'
+        /// scenes keep their names. Default: JRDB's seven.
+        #[arg(long, value_delimiter = ',')]
+        val_sequences: Option<Vec<String>>,
     },
     /// Recount points in each labelled box under the Box3d convention and its alternatives.
     CheckBoxes {
@@ -85,9 +106,9 @@ enum Cmd {
     },
 }
 
-fn open_all(root: &std::path::Path, sequences: Option<Vec<String>>) -> anyhow::Result<JrdbDataset> {
-    let cfg = DatasetConfig { split: Split::TrainVal, sequences, require_labels: false, ..Default::default() };
-    Ok(JrdbDataset::open(root, &cfg)?)
+fn open_all(root: &std::path::Path, format: DatasetFormat, sequences: Option<Vec<String>>) -> anyhow::Result<Dataset> {
+    let cfg = DatasetConfig { format, split: Split::TrainVal, sequences, require_labels: false, ..Default::default() };
+    Ok(Dataset::open(root, &cfg)?)
 }
 
 fn run(cli: Cli) -> anyhow::Result<()> {
@@ -118,8 +139,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 t.elapsed().as_secs_f64()
             );
         }
-        Cmd::Stats { root, json, sequences } => {
-            let ds = open_all(&root, sequences)?;
+        Cmd::Stats { root, format, json, sequences } => {
+            let ds = open_all(&root, format, sequences)?;
             let s = stats::compute(&ds, &VoxelConfig::default())?;
             if json {
                 println!("{}", serde_json::to_string_pretty(&s)?);
@@ -128,7 +149,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             }
         }
         Cmd::CheckBoxes { root, stride } => {
-            let ds = open_all(&root, None)?;
+            let ds = open_all(&root, DatasetFormat::Jrdb, None)?;
             for a in convention::check(&ds, stride)? {
                 println!(
                     "{:<32} boxes {:>7}  exact {:>6.1}%  within 10% {:>6.1}%  mean |diff| {:.2}",
@@ -138,6 +159,25 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     100.0 * a.close as f64 / a.boxes.max(1) as f64,
                     a.mean_abs_diff
                 );
+            }
+        }
+        Cmd::Export { root, out, to, val_sequences } => {
+            let ds = open_all(&root, DatasetFormat::Jrdb, None)?;
+            let val = val_sequences.unwrap_or_else(|| DEFAULT_VAL_SEQUENCES.map(String::from).to_vec());
+            let t = Instant::now();
+            let s = export::export(&ds, to, &out, &val)?;
+            println!(
+                "wrote {} frames ({} in validation), {} people to {} in {to} layout in {:.1} s",
+                s.frames,
+                s.val_frames,
+                s.boxes,
+                out.display(),
+                t.elapsed().as_secs_f64()
+            );
+            match to {
+                DatasetFormat::Kitti => println!("train on it with [data] format = \"kitti\", root = {:?}, and [data.kitti] camera_view_only = false (the simulated people stand all around)", out),
+                DatasetFormat::Nuscenes => println!("train on it with [data] format = \"nuscenes\", root = {:?}, and [data.nuscenes] val_scenes = {:?}", out, val),
+                DatasetFormat::Jrdb => {}
             }
         }
     }

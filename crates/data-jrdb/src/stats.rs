@@ -7,7 +7,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::box3d::Box3d;
-use crate::dataset::JrdbDataset;
+use crate::dataset::Dataset;
 use crate::error::Result;
 use crate::voxelize::{VoxelConfig, voxelize};
 
@@ -130,7 +130,7 @@ fn bucket(n: i64) -> String {
 }
 
 /// Reads every frame (in parallel) and gathers the statistics; the first bad file is the error.
-pub fn compute(ds: &JrdbDataset, voxel: &VoxelConfig) -> Result<Stats> {
+pub fn compute(ds: &Dataset, voxel: &VoxelConfig) -> Result<Stats> {
     let per: Vec<(String, Counts, Vec<i64>, Vec<Box3d>)> = (0..ds.len())
         .into_par_iter()
         .map(|i| {

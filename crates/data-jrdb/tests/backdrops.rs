@@ -9,7 +9,7 @@ use data_jrdb::sim::geometry::Shape;
 use data_jrdb::sim::scene::Prim;
 use data_jrdb::sim::sensors::SensorModel;
 use data_jrdb::sim::{SynthConfig, World, synth};
-use data_jrdb::{DatasetConfig, JrdbDataset, Split};
+use data_jrdb::{DatasetConfig, Dataset, Split};
 
 const HEIGHT: f64 = 1.8;
 
@@ -36,7 +36,7 @@ fn people_stand_on_the_backdrops_ground_and_cast_shadows() {
     let summary = synth(out.path(), &config(bd.path(), 5)).unwrap();
     assert_eq!(summary.sequences.len(), 4);
     assert!(summary.sequences.iter().all(|s| s.starts_with("bd-train-street-")), "{:?}", summary.sequences);
-    let ds = JrdbDataset::open(out.path(), &DatasetConfig { split: Split::TrainVal, require_labels: false, ..Default::default() }).unwrap();
+    let ds = Dataset::open(out.path(), &DatasetConfig { split: Split::TrainVal, require_labels: false, ..Default::default() }).unwrap();
     assert_eq!(ds.len(), 8);
     let mut people = 0;
     for i in 0..ds.len() {

@@ -4,14 +4,14 @@ use std::sync::Arc;
 
 use data_jrdb::sim::{SynthConfig, synth};
 use data_jrdb::voxelize::{voxel_centre, voxel_coord};
-use data_jrdb::{DatasetConfig, JrdbDataset, Loader, LoaderConfig, OnBadFrame, SampleConfig, Split, prepare};
+use data_jrdb::{DatasetConfig, Dataset, Loader, LoaderConfig, OnBadFrame, SampleConfig, Split, prepare};
 use rand::SeedableRng;
 
-fn dataset(name: &str) -> JrdbDataset {
+fn dataset(name: &str) -> Dataset {
     let root = std::env::temp_dir().join(format!("jrdb-batch-{}-{name}", std::process::id()));
     let _ = std::fs::remove_dir_all(&root);
     synth(&root, &SynthConfig { sequences: 2, frames: 3, seed: 21, max_people: 16, ..Default::default() }).unwrap();
-    JrdbDataset::open(&root, &DatasetConfig { split: Split::TrainVal, ..Default::default() }).unwrap()
+    Dataset::open(&root, &DatasetConfig { split: Split::TrainVal, ..Default::default() }).unwrap()
 }
 
 #[test]
@@ -78,7 +78,7 @@ fn loader_is_seeded_and_prefetch_changes_nothing() {
 #[test]
 fn loader_skips_or_fails_on_a_frame_broken_after_opening() {
     let ds = dataset("broken");
-    std::fs::write(&ds.frames[2].upper, b"VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nWIDTH 5\nPOINTS 5\nDATA binary\n\x00").unwrap();
+    std::fs::write(ds.frames[2].cloud_files()[0], b"VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nWIDTH 5\nPOINTS 5\nDATA binary\n\x00").unwrap();
     let ds = Arc::new(ds);
     let cfg = LoaderConfig { batch_size: 3, shuffle: false, prefetch: true, ..Default::default() };
     let fail: Vec<_> = Loader::new(ds.clone(), cfg.clone()).epoch(0).collect();

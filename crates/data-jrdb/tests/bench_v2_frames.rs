@@ -4,7 +4,7 @@
 //! returns.
 
 use data_jrdb::sim::{Preset, SynthConfig, synth};
-use data_jrdb::{DatasetConfig, JrdbDataset, Split};
+use data_jrdb::{DatasetConfig, Dataset, Split};
 
 #[test]
 fn bench_v2_frames_are_levelled_on_the_platforms_ground() {
@@ -15,7 +15,7 @@ fn bench_v2_frames_are_levelled_on_the_platforms_ground() {
     assert_eq!(rows.len(), 7);
     let places: Vec<&str> = rows.iter().map(|r| r[0].split('-').nth(2).unwrap()).collect();
     assert_eq!(places, ["street", "campus", "hall", "street", "plaza", "campus", "corridor"]);
-    let ds = JrdbDataset::open(dir.path(), &DatasetConfig { split: Split::TrainVal, require_labels: false, ..Default::default() }).unwrap();
+    let ds = Dataset::open(dir.path(), &DatasetConfig { split: Split::TrainVal, require_labels: false, ..Default::default() }).unwrap();
     assert_eq!(ds.len(), 7);
     for i in 0..ds.len() {
         let f = ds.load(i).unwrap();

@@ -11,7 +11,7 @@
 //! with eight, each moves it.
 
 use data_jrdb::sim::{Preset, SynthConfig, synth};
-use data_jrdb::{DatasetConfig, JrdbDataset, Split};
+use data_jrdb::{DatasetConfig, Dataset, Split};
 
 /// FNV-1a, 64 bits: a stable digest with no dependency.
 struct Fnv(u64);
@@ -32,7 +32,7 @@ fn digest(preset: Preset, sequences: usize) -> (usize, usize, usize, String) {
     let dir = tempfile::tempdir().unwrap();
     let cfg = SynthConfig { sequences, frames: 2, ..preset.synth(0) };
     synth(dir.path(), &cfg).unwrap();
-    let ds = JrdbDataset::open(dir.path(), &DatasetConfig { split: Split::TrainVal, require_labels: false, ..Default::default() }).unwrap();
+    let ds = Dataset::open(dir.path(), &DatasetConfig { split: Split::TrainVal, require_labels: false, ..Default::default() }).unwrap();
     let mut h = Fnv(0xcbf2_9ce4_8422_2325);
     let (mut points, mut boxes) = (0, 0);
     for i in 0..ds.len() {

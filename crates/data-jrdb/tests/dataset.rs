@@ -5,7 +5,7 @@ use std::process::Command;
 
 use data_jrdb::calibration::Lidar;
 use data_jrdb::sim::{SynthConfig, synth};
-use data_jrdb::{DatasetConfig, ErrorKind, JrdbDataset, OnBadFrame, Split};
+use data_jrdb::{DatasetConfig, ErrorKind, Dataset, OnBadFrame, Split};
 
 fn tmp(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("jrdb-test-{}-{name}", std::process::id()));
@@ -42,7 +42,7 @@ fn files(root: &Path) -> Vec<(PathBuf, Vec<u8>)> {
 fn simulated_tree_reads_back_with_exact_num_points() {
     let root = tmp("roundtrip");
     let s = synth(&root, &small(7)).unwrap();
-    let ds = JrdbDataset::open(&root, &all()).unwrap();
+    let ds = Dataset::open(&root, &all()).unwrap();
     assert_eq!(ds.len(), 6);
     assert_eq!(ds.sequences, {
         let mut v = s.sequences.clone();
@@ -64,8 +64,8 @@ fn simulated_tree_reads_back_with_exact_num_points() {
     assert_eq!((points, boxes), (s.points, s.boxes));
     assert!(boxes > 0);
     // Default split: the simulator names one of its two sequences after a JRDB validation sequence.
-    let train = JrdbDataset::open(&root, &DatasetConfig::default()).unwrap();
-    let val = JrdbDataset::open(&root, &DatasetConfig { split: Split::Val, ..Default::default() }).unwrap();
+    let train = Dataset::open(&root, &DatasetConfig::default()).unwrap();
+    let val = Dataset::open(&root, &DatasetConfig { split: Split::Val, ..Default::default() }).unwrap();
     assert_eq!((train.len(), val.len()), (3, 3));
     assert_eq!(val.sequences, ["clark-center-2019-02-28_1"]);
 }
@@ -90,7 +90,7 @@ fn encodings_and_the_with_activity_folder_read_the_same() {
     for enc in [data_jrdb::Encoding::Ascii, data_jrdb::Encoding::Binary, data_jrdb::Encoding::BinaryCompressed] {
         let root = base.join(enc.keyword()).join("train_dataset_with_activity");
         synth(&root, &SynthConfig { sequences: 1, frames: 1, max_people: 5, encoding: enc, ..small(3) }).unwrap();
-        let ds = JrdbDataset::open(root.parent().unwrap(), &all()).unwrap();
+        let ds = Dataset::open(root.parent().unwrap(), &all()).unwrap();
         loaded.push(ds.load(0).unwrap());
     }
     assert_eq!(loaded[0], loaded[1]);
@@ -98,7 +98,7 @@ fn encodings_and_the_with_activity_folder_read_the_same() {
 }
 
 fn expect_err(root: &Path, cfg: &DatasetConfig, names: &str) -> data_jrdb::DataError {
-    let e = JrdbDataset::open(root, cfg).expect_err("should fail");
+    let e = Dataset::open(root, cfg).expect_err("should fail");
     assert!(e.to_string().contains(names), "`{e}` should name {names}");
     e
 }
@@ -122,11 +122,11 @@ fn malformed_trees_are_errors_naming_the_file() {
     std::fs::write(&labels, "{\"frames\": {}}").unwrap();
     expect_err(&root, &all(), "`labels`");
     // Skipping a sequence with bad labels keeps the others.
-    let ds = JrdbDataset::open(&root, &DatasetConfig { on_bad_frame: OnBadFrame::Skip, ..all() }).unwrap();
+    let ds = Dataset::open(&root, &DatasetConfig { on_bad_frame: OnBadFrame::Skip, ..all() }).unwrap();
     assert_eq!(ds.len(), 3);
     std::fs::remove_file(&labels).unwrap();
     expect_err(&root, &all(), &format!("{seq}.json"));
-    let ds = JrdbDataset::open(&root, &DatasetConfig { require_labels: false, ..all() }).unwrap();
+    let ds = Dataset::open(&root, &DatasetConfig { require_labels: false, ..all() }).unwrap();
     assert_eq!(ds.len(), 6);
     std::fs::write(&labels, &good).unwrap();
 
@@ -143,7 +143,7 @@ fn malformed_trees_are_errors_naming_the_file() {
     std::fs::remove_file(lower.join("000001.pcd")).unwrap();
     let e = expect_err(&root, &all(), &format!("upper_velodyne/{seq}/000001.pcd"));
     assert!(e.to_string().contains("lower twin"));
-    let ds = JrdbDataset::open(&root, &DatasetConfig { on_bad_frame: OnBadFrame::Skip, ..all() }).unwrap();
+    let ds = Dataset::open(&root, &DatasetConfig { on_bad_frame: OnBadFrame::Skip, ..all() }).unwrap();
     assert_eq!(ds.len(), 5);
 
     // Calibration.

@@ -13,7 +13,7 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
-use data_jrdb::{DatasetConfig, JrdbDataset, Split};
+use data_jrdb::{DatasetConfig, Dataset, Split};
 use train::{RunDetector, Slot};
 
 fn main() -> Result<()> {
@@ -23,7 +23,7 @@ fn main() -> Result<()> {
     let run = PathBuf::from(args.get(2).map_or("weights/person_minkunet", String::as_str));
 
     let detector = RunDetector::load(&run, Slot::Latest, None)?;
-    let ds = JrdbDataset::open(&tree, &DatasetConfig { split: Split::TrainVal, require_labels: false, ..Default::default() })?;
+    let ds = Dataset::open(&tree, &DatasetConfig { split: Split::TrainVal, require_labels: false, ..Default::default() })?;
     let scan = ds.load(frame)?;
     let found = detector.detect(&scan.points);
 

@@ -151,6 +151,7 @@ mod tests {
             name: "000000".into(),
             gt: vec![person(3.0, 4.0), person(0.0, -12.0), person(8.0, 0.0), person(30.0, 0.0)],
             num_points: vec![200, 40, 5, 50],
+            ignored: vec![],
             detections: vec![
                 det(3.0 - 0.1 * ux - 0.05 * uy, 4.0 - 0.1 * uy + 0.05 * ux, 0.9),
                 det(0.0, -12.04, 0.8),

@@ -5,7 +5,7 @@ use std::sync::Arc;
 
 use anyhow::{Context, Result, bail};
 use data_jrdb::sim::{SimulateConfig, SynthSummary, synth};
-use data_jrdb::{DataConfig, JrdbDataset, Loader, LoaderConfig, Split};
+use data_jrdb::{DataConfig, Dataset, DatasetFormat, Loader, LoaderConfig, Split};
 
 use crate::config::RunConfig;
 
@@ -14,6 +14,9 @@ use crate::config::RunConfig;
 /// complete, so an interrupted generation is redone rather than half-used). Returns what was
 /// written.
 pub fn ensure_dataset(cfg: &DataConfig) -> Result<Option<SynthSummary>> {
+    if cfg.simulate.is_some() && cfg.format != DatasetFormat::Jrdb {
+        bail!("data.simulate writes a JRDB-format tree, but data.format is {}: drop one of them", cfg.format);
+    }
     ensure_tree(&cfg.root, cfg.simulate.as_ref(), "data")
 }
 
@@ -54,9 +57,9 @@ fn ensure_tree(root: &Path, simulate: Option<&SimulateConfig>, section: &str) ->
 }
 
 /// Opens one split of the tree, keeping every `stride`-th frame.
-pub fn open_split(cfg: &DataConfig, split: Split, stride: usize) -> Result<Arc<JrdbDataset>> {
+pub fn open_split(cfg: &DataConfig, split: Split, stride: usize) -> Result<Arc<Dataset>> {
     let dcfg = cfg.dataset(split);
-    let mut ds = JrdbDataset::open(&cfg.root, &dcfg).with_context(|| format!("opening {:?} split of {}", split, cfg.root.display()))?;
+    let mut ds = Dataset::open(&cfg.root, &dcfg).with_context(|| format!("opening {:?} split of {}", split, cfg.root.display()))?;
     if stride > 1 {
         ds.frames = ds.frames.into_iter().step_by(stride).collect();
     }
@@ -70,8 +73,9 @@ pub fn open_split(cfg: &DataConfig, split: Split, stride: usize) -> Result<Arc<J
 pub fn train_loader(cfg: &RunConfig) -> Result<Loader> {
     let mut ds = Arc::into_inner(open_split(&cfg.data, cfg.data.train_split, 1)?).expect("a fresh dataset has one owner");
     for extra in &cfg.data.also_train {
-        let dcfg = cfg.data.dataset(cfg.data.train_split);
-        let more = JrdbDataset::open(&extra.root, &dcfg).with_context(|| format!("opening {:?} split of {} (data.also_train)", cfg.data.train_split, extra.root.display()))?;
+        // Extra trees are JRDB-format (simulated) whatever `data.format` is.
+        let dcfg = data_jrdb::DatasetConfig { format: DatasetFormat::Jrdb, ..cfg.data.dataset(cfg.data.train_split) };
+        let more = Dataset::open(&extra.root, &dcfg).with_context(|| format!("opening {:?} split of {} (data.also_train)", cfg.data.train_split, extra.root.display()))?;
         if more.is_empty() {
             bail!("the {:?} split of {} (data.also_train) has no frames", cfg.data.train_split, extra.root.display());
         }

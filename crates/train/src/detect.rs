@@ -20,7 +20,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail, ensure};
 use data_jrdb::split::Layout;
-use data_jrdb::{Box3d, CloudFormat, DatasetConfig, FormatInfo, JrdbDataset, Split, read_cloud};
+use data_jrdb::{Box3d, CloudFormat, DatasetConfig, FormatInfo, Dataset, Split, read_cloud};
 use eval::jrdb::Detection;
 use eval::kitti::{FileKind, KittiObject};
 use indicatif::ProgressBar;
@@ -166,7 +166,7 @@ pub enum Source {
     /// A cloud file.
     File(PathBuf),
     /// Frame `index` of a JRDB-format tree (both LiDARs merged by its calibration).
-    Tree(Arc<JrdbDataset>, usize),
+    Tree(Arc<Dataset>, usize),
     /// A recording (MCAP): every point cloud on `DetectOptions::topic`.
     Recording(PathBuf),
 }
@@ -184,7 +184,7 @@ impl Input {
     fn describe(&self) -> String {
         match &self.source {
             Source::File(p) | Source::Recording(p) => p.display().to_string(),
-            Source::Tree(ds, i) => format!("{}/{}/{}", ds.layout.root.display(), ds.frames[*i].sequence, ds.frames[*i].name),
+            Source::Tree(ds, i) => format!("{}/{}/{}", ds.root.display(), ds.frames[*i].sequence, ds.frames[*i].name),
         }
     }
 }
@@ -234,7 +234,7 @@ fn add_path(p: &Path, inputs: &mut Vec<Input>) -> Result<()> {
     }
     if Layout::resolve(p).is_ok() {
         let cfg = DatasetConfig { split: Split::TrainVal, require_labels: false, ..Default::default() };
-        let ds = Arc::new(JrdbDataset::open(p, &cfg).with_context(|| format!("{}: reading the JRDB-format tree", p.display()))?);
+        let ds = Arc::new(Dataset::open(p, &cfg).with_context(|| format!("{}: reading the JRDB-format tree", p.display()))?);
         ensure!(!ds.is_empty(), "{}: the JRDB-format tree has no frames", p.display());
         for (i, f) in ds.frames.iter().enumerate() {
             inputs.push(Input { source: Source::Tree(ds.clone(), i), name: format!("{}/{}", f.sequence, f.name) });
@@ -460,7 +460,7 @@ fn write_frame(detector: &RunDetector, input: &Input, opts: &DetectOptions, poin
         if let Some(dir) = png.parent() {
             std::fs::create_dir_all(dir).with_context(|| format!("{}: creating the folder", dir.display()))?;
         }
-        let frame = FrameResult { sequence: String::new(), name: input.name.clone(), gt: Vec::new(), num_points: Vec::new(), detections: found.base };
+        let frame = FrameResult { sequence: String::new(), name: input.name.clone(), gt: Vec::new(), num_points: Vec::new(), ignored: Vec::new(), detections: found.base };
         render_bev(&found.base_points, &frame, &png, detector.config().eval.max_range.unwrap_or(25.0))?;
     }
     Ok((report, secs))

@@ -105,6 +105,7 @@ impl RunDetector {
             boxes: Vec::new(),
             num_points: Vec::new(),
             label_ids: Vec::new(),
+            ignored: Vec::new(),
         };
         // Evaluation samples draw nothing at random (no augmentation, no cap).
         let sample = prepare(frame, &self.config.data.eval_sample(), &mut rand_chacha::ChaCha8Rng::seed_from_u64(0));

@@ -41,8 +41,10 @@ pub struct InferOptions {
     pub backend: Option<BackendKind>,
     /// Progress bars and the report table on stderr.
     pub verbose: bool,
-    /// Run on this JRDB-format tree instead of the run's own `data.root` (never simulated).
+    /// Run on this dataset instead of the run's own `data.root` (never simulated).
     pub data_root: Option<PathBuf>,
+    /// Its layout, when not the run's `data.format` (a JRDB-trained run scored on KITTI, say).
+    pub data_format: Option<data_jrdb::DatasetFormat>,
     /// Config overrides (`model.post.merge_radius=0.4`), as `--set` of training.
     pub set: Vec<String>,
     /// Write detections here instead of `<run>/detections/<split>/`.
@@ -111,7 +113,10 @@ pub fn detect_run_split(
 
 /// Loads the run's model from a checkpoint and writes, scores and draws its detections.
 pub fn infer(run: &RunDir, opts: &InferOptions) -> Result<InferOutput> {
-    let cfg = if opts.set.is_empty() { run.config()? } else { RunConfig::load(&run.config_file(), &opts.set)? };
+    let mut cfg = if opts.set.is_empty() { run.config()? } else { RunConfig::load(&run.config_file(), &opts.set)? };
+    if let Some(format) = opts.data_format {
+        cfg.data.format = format;
+    }
     let slot = opts.checkpoint.unwrap_or(Slot::Latest);
     let (detector, loader, frames) = detect_run_split(run, cfg, opts.data_root.as_deref(), opts.backend, slot, opts.split, opts.verbose)?;
     let cfg = detector.config();

@@ -118,10 +118,13 @@ enum Cmd {
         /// Backend (overrides the run's).
         #[arg(long, value_enum)]
         backend: Option<BackendKind>,
-        /// Run on this JRDB-format tree (e.g. a simulated benchmark generated with another seed)
-        /// instead of the run's own data.
+        /// Run on this dataset (e.g. a simulated benchmark generated with another seed, or a
+        /// KITTI or nuScenes root with --data-format) instead of the run's own data.
         #[arg(long, value_name = "DIR")]
         data_root: Option<PathBuf>,
+        /// The layout of --data-root when not the run's (`kitti`, `nuscenes`, `jrdb`).
+        #[arg(long, value_enum, requires = "data_root")]
+        data_format: Option<data_jrdb::DatasetFormat>,
         /// Override a key of the run's config for this inference, e.g.
         /// `--set model.post.merge_radius=0.4` (repeatable; the run's config.toml is unchanged).
         #[arg(long = "set", value_name = "KEY=VALUE")]
@@ -458,12 +461,12 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let r = match cli.cmd {
         None => run_train(cli.train),
-        Some(Cmd::Infer { run, split, checkpoint, render, backend, data_root, set, out }) => (|| -> Result<()> {
+        Some(Cmd::Infer { run, split, checkpoint, render, backend, data_root, data_format, set, out }) => (|| -> Result<()> {
             let dir = RunDir::at(&run);
             let b = backend.unwrap_or(dir.config()?.backend);
             pin(b);
             let (split, checkpoint) = (split.into(), checkpoint.map(Slot::from));
-            let out = train::infer(&dir, &InferOptions { split, checkpoint, render, backend, verbose: true, data_root, set, out })?;
+            let out = train::infer(&dir, &InferOptions { split, checkpoint, render, backend, verbose: true, data_root, data_format, set, out })?;
             println!("{}", out.table);
             println!("{} frames; detections and scores in {}", out.frames, out.dir.display());
             Ok(())

@@ -7,7 +7,7 @@
 use std::path::Path;
 
 use anyhow::{Context, Result, anyhow};
-use data_jrdb::{Box3d, JrdbDataset};
+use data_jrdb::{Box3d, Dataset};
 use image::ImageEncoder;
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -25,7 +25,7 @@ fn pe<E: std::fmt::Debug>(e: E) -> anyhow::Error {
 }
 
 /// Draws each frame of `frames` (points read back from `dataset`) into `dir/<sequence>_<frame>.png`.
-pub fn render_frames(dataset: &JrdbDataset, frames: &[FrameResult], dir: &Path, eval_range: Option<f64>) -> Result<()> {
+pub fn render_frames(dataset: &Dataset, frames: &[FrameResult], dir: &Path, eval_range: Option<f64>) -> Result<()> {
     std::fs::create_dir_all(dir)?;
     for f in frames {
         let i = dataset

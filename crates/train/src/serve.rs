@@ -249,7 +249,7 @@ fn start_model_thread(opts: &ServeOptions, mut rx: mpsc::Receiver<Job>) -> Resul
                     let placement = frame.place(&points);
                     let found = find_people(&detector, &points, &placement.pose, score_threshold);
                     if render {
-                        let frame = FrameResult { sequence: String::new(), name: "request".into(), gt: vec![], num_points: vec![], detections: found.base };
+                        let frame = FrameResult { sequence: String::new(), name: "request".into(), gt: vec![], num_points: vec![], ignored: vec![], detections: found.base };
                         render_bev_png(&found.base_points, &frame, range).map(Answer::Png).map_err(|e| format!("{e:#}"))
                     } else {
                         Ok(Answer::Boxes(found.input.iter().map(|d| BoxRecord::new(&d.bbox, d.score)).collect(), found.dropped_out_of_volume, placement))

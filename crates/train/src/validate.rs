@@ -25,6 +25,9 @@ pub struct FrameResult {
     pub gt: Vec<Box3d>,
     /// `num_points` of each GT box.
     pub num_points: Vec<i64>,
+    /// Boxes the evaluator ignores (KITTI's cyclists, nuScenes' strollers): a detection on one
+    /// counts neither way.
+    pub ignored: Vec<Box3d>,
     /// Detections, best first.
     pub detections: Vec<Detection>,
 }
@@ -47,10 +50,15 @@ impl FrameResult {
             .iter()
             .zip(&self.num_points)
             .map(|(b, &n)| KittiObject::ground_truth(b, n, -1.0))
+            .chain(self.ignored.iter().map(|b| KittiObject { kind: IGNORED_KIND.into(), ..KittiObject::ground_truth(b, 0, -1.0) }))
             .collect();
         Frame { sequence: self.sequence.clone(), name: self.name.clone(), gt, det: detections_to_kitti(&self.detections) }
     }
 }
+
+/// The type an ignored box is written with for the evaluator: not `Pedestrian`, so a detection
+/// on it is neither a true nor a false positive (and not `DontCare`, which is a 2D region).
+pub const IGNORED_KIND: &str = "Ignored";
 
 /// BEV range bands (metres) AP is also reported in: near, middle and far of the official 25 m,
 /// since far people are where detectors differ.
@@ -163,7 +171,7 @@ pub fn visit_split(
         for (b, d) in dets.into_iter().enumerate() {
             let (sequence, name) = batch.frames[b].clone();
             let detections = d.boxes.iter().zip(&d.scores).map(|(bb, &s)| Detection { bbox: *bb, score: s as f64 }).collect();
-            let frame = FrameResult { sequence, name, gt: batch.boxes[b].clone(), num_points: batch.num_points[b].clone(), detections };
+            let frame = FrameResult { sequence, name, gt: batch.boxes[b].clone(), num_points: batch.num_points[b].clone(), ignored: batch.ignored.get(b).cloned().unwrap_or_default(), detections };
             visit(frame, batch.clouds.get(b).map_or(&[][..], Vec::as_slice));
         }
         pb.inc(batch.len() as u64);
@@ -257,6 +265,7 @@ mod tests {
             name: "000000".into(),
             gt: vec![b, far],
             num_points: vec![50, 50],
+            ignored: vec![],
             detections: dets,
         };
         let p = Protocol::official();
@@ -272,6 +281,15 @@ mod tests {
         let shifted = Box3d { cx: 5.3, ..b };
         let r = score(&many(&|i| vec![Detection { bbox: shifted, score: 0.5 + i as f64 / 100.0 }]), &p);
         assert!(r.ap3d[0].ap > 0.9 && r.ap3d[2].ap < 0.1, "{:?}", [r.ap3d[0].ap, r.ap3d[2].ap]);
+        // A detection on an ignored box (a cyclist) counts neither way; on nothing it is false.
+        let cyclist = Box3d { cx: 8.0, cy: -2.0, ..b };
+        let with = |ignored: Vec<Box3d>| -> Vec<FrameResult> {
+            (0..50).map(|i| FrameResult { ignored: ignored.clone(), detections: vec![Detection { bbox: b, score: 0.5 }, Detection { bbox: cyclist, score: 0.9 }], name: format!("{i:06}"), ..mk(vec![]) }).collect()
+        };
+        let r = score(&with(vec![cyclist]), &p);
+        assert!((r.ap3d[0].ap - 1.0).abs() < 1e-9, "{}", r.ap3d[0].ap);
+        let r = score(&with(vec![]), &p);
+        assert!(r.ap3d[0].ap < 0.6, "{}", r.ap3d[0].ap);
     }
 
     /// Square boxes (IoU does not see the heading) turned by hand-picked errors: the medians over
@@ -288,6 +306,7 @@ mod tests {
                 name: format!("{i:06}"),
                 gt: vec![gt],
                 num_points: vec![50],
+                ignored: vec![],
                 detections: vec![Detection { bbox: Box3d { rot_z: gt.rot_z + e.to_radians(), ..gt }, score: 0.9 }],
             })
             .collect();

@@ -42,10 +42,11 @@ naming = "places"
     // (the second): 4 × 3.
     let train = train_loader(&cfg).unwrap();
     assert_eq!(train.dataset().len(), 3 * 2 + 4 * 3);
-    assert!(train.dataset().frames.iter().any(|f| f.upper.starts_with(&b)));
+    let upper = |f: &data_jrdb::dataset::FrameRef| f.cloud_files()[0].to_path_buf();
+    assert!(train.dataset().frames.iter().any(|f| upper(f).starts_with(&b)));
     let val = eval_loader(&cfg, cfg.data.val_split).unwrap();
     assert_eq!(val.dataset().len(), 2);
-    assert!(val.dataset().frames.iter().all(|f| f.upper.starts_with(&a)));
+    assert!(val.dataset().frames.iter().all(|f| upper(f).starts_with(&a)));
 
     // Another calibration cannot be merged by the root's: refused, naming the file.
     let calib = b.join("calibration/defaults.yaml");

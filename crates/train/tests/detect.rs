@@ -16,7 +16,7 @@ use std::time::Duration;
 
 use data_jrdb::pcd::{Column, Encoding, FieldType, encode_pcd};
 use data_jrdb::sim::{SynthConfig, synth};
-use data_jrdb::{DatasetConfig, JrdbDataset, Split, encode_npy};
+use data_jrdb::{DatasetConfig, Dataset, Split, encode_npy};
 use eval::jrdb::read_detections;
 use common::{ok, report, train_bin};
 use train::{BoxRecord, FrameReport};
@@ -29,7 +29,7 @@ fn weights() -> PathBuf {
 fn tree(dir: &Path) -> (PathBuf, Vec<data_jrdb::Frame>) {
     let root = dir.join("sim");
     synth(&root, &SynthConfig { sequences: 1, frames: 2, seed: 11, max_people: 12, ..Default::default() }).unwrap();
-    let ds = JrdbDataset::open(&root, &DatasetConfig { split: Split::TrainVal, require_labels: false, ..Default::default() }).unwrap();
+    let ds = Dataset::open(&root, &DatasetConfig { split: Split::TrainVal, require_labels: false, ..Default::default() }).unwrap();
     let frames = (0..ds.len()).map(|i| ds.load(i).unwrap()).collect();
     (root, frames)
 }

@@ -4,7 +4,7 @@
 use std::path::Path;
 
 use data_jrdb::sim::{SynthConfig, synth};
-use data_jrdb::{JrdbDataset, Loader, LoaderConfig, Split};
+use data_jrdb::{Dataset, Loader, LoaderConfig, Split};
 use train::{RunDetector, Slot};
 
 fn weights() -> std::path::PathBuf {
@@ -18,7 +18,7 @@ fn one_cloud_at_a_time_matches_the_batch_path() {
     synth(&root, &SynthConfig { sequences: 1, frames: 3, seed: 11, max_people: 12, ..Default::default() }).unwrap();
     let detector = RunDetector::load(&weights(), Slot::Latest, None).unwrap();
     let data = &detector.config().data;
-    let ds = std::sync::Arc::new(JrdbDataset::open(&root, &data.dataset(Split::TrainVal)).unwrap());
+    let ds = std::sync::Arc::new(Dataset::open(&root, &data.dataset(Split::TrainVal)).unwrap());
     let loader = Loader::new(ds.clone(), LoaderConfig { batch_size: 2, shuffle: false, sample: data.eval_sample(), prefetch: false, ..Default::default() });
     let mut batched = Vec::new();
     for batch in loader.epoch(0) {

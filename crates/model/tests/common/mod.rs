@@ -2,7 +2,7 @@
 #![allow(dead_code)]
 
 use data_jrdb::sim::{SynthConfig, synth};
-use data_jrdb::{Batch, DatasetConfig, JrdbDataset, SampleConfig, Split, collate, prepare};
+use data_jrdb::{Batch, DatasetConfig, Dataset, SampleConfig, Split, collate, prepare};
 use eval::ap::{Frame, Overlap, Protocol, evaluate};
 use eval::kitti::KittiObject;
 use model::{Detections, Detector};
@@ -32,7 +32,7 @@ pub fn sim_batch(name: &str, frames: usize, max_people: usize, radius: f32, seed
     let root = std::env::temp_dir().join(format!("pmunet-model-{}-{name}", std::process::id()));
     let _ = std::fs::remove_dir_all(&root);
     synth(&root, &SynthConfig { sequences: 1, frames, seed, max_people, ..Default::default() }).unwrap();
-    let ds = JrdbDataset::open(&root, &DatasetConfig { split: Split::TrainVal, ..Default::default() }).unwrap();
+    let ds = Dataset::open(&root, &DatasetConfig { split: Split::TrainVal, ..Default::default() }).unwrap();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     let samples = (0..ds.len())
         .map(|i| {

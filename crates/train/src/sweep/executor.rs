@@ -32,7 +32,7 @@ pub fn rescore(job: &Job, verbose: bool) -> Result<Option<TrainSummary>> {
     }
     let before = std::fs::read(run.config_file())?;
     write_atomic(&run.config_file(), job.config.to_toml()?.as_bytes())?;
-    let opts = InferOptions { split: job.config.data.val_split, checkpoint: Some(Slot::Latest), render: 0, backend: None, verbose, data_root: None, set: vec![], out: None };
+    let opts = InferOptions { split: job.config.data.val_split, checkpoint: Some(Slot::Latest), render: 0, backend: None, verbose, data_root: None, data_format: None, set: vec![], out: None };
     // A run that cannot be scored (no checkpoint, say) keeps the settings it was scored with.
     let out = match infer(&run, &opts) {
         Ok(out) => out,
