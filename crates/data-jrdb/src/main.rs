@@ -28,7 +28,7 @@ enum Enc {
 enum PresetArg {
     /// 160 sequences × 10 frames: 1,200 training and 400 validation frames from disjoint scenes.
     BenchV1,
-    /// As large, in streets, campuses and cluttered halls seen by ten sensor models on cars,
+    /// As large, in streets, campuses and cluttered halls seen by nine sensor models (eleven rigs) on cars,
     /// robots and masts 0.3–2.2 m up (docs/simulated-benchmark.md).
     BenchV2,
 }

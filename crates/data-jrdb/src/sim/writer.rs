@@ -51,8 +51,8 @@ pub enum World {
     /// JRDB-like corridors, halls and plazas seen by JRDB's two VLP-16 at a fixed height.
     #[default]
     V1,
-    /// Streets, campuses and furnished indoor places, a varied crowd, one of ten sensors (or
-    /// JRDB's pair) on a car, robot or mast 0.3–2.2 m up and tipped a few degrees, the platform's
+    /// Streets, campuses and furnished indoor places, a varied crowd, one of eleven rigs (nine sensor
+    /// models, JRDB's pair among them) on a car, robot or mast 0.3–2.2 m up and tipped a few degrees, the platform's
     /// own body in view; each cloud written levelled, the ground under the platform at the base
     /// frame's floor (`World::V2` writes it as the upper sensor's cloud; the lower one is empty).
     V2,
