@@ -131,6 +131,18 @@ def main():
         put("pointcloud2", "organised_4x4.cdr", cloud([("x", 0, 7), ("y", 4, 7), ("z", 8, 7)], 12, 4, 4, False, org.tobytes()))
         be = pts.astype(">f8")[:, [2, 0, 1]]
         put("pointcloud2", "float64_be_16.cdr", cloud([("z", 0, 8), ("x", 8, 8), ("y", 16, 8)], 24, 1, 16, True, be.tobytes()))
+        # The same three in ROS 1's serialization (a .bag's messages).
+        ts1 = get_typestore(Stores.ROS1_NOETIC)
+        PC1, PF1 = ts1.types["sensor_msgs/msg/PointCloud2"], ts1.types["sensor_msgs/msg/PointField"]
+        Header1, Time1 = ts1.types["std_msgs/msg/Header"], ts1.types["builtin_interfaces/msg/Time"]
+        def cloud1(fields, step, h, w, big, data):
+            m = PC1(header=Header1(seq=3, stamp=Time1(sec=1, nanosec=2), frame_id="lidar"), height=h, width=w,
+                    fields=[PF1(name=n, offset=o, datatype=t, count=1) for n, o, t in fields],
+                    is_bigendian=big, point_step=step, row_step=step * w, data=np.frombuffer(data, np.uint8), is_dense=False)
+            return bytes(ts1.serialize_ros1(m, PC1.__msgtype__))
+        put("pointcloud2_ros1", "velodyne_16.ros1", cloud1([("x", 0, 7), ("y", 4, 7), ("z", 8, 7), ("intensity", 12, 7), ("ring", 16, 4)], 20, 1, 16, False, rec.tobytes()))
+        put("pointcloud2_ros1", "organised_4x4.ros1", cloud1([("x", 0, 7), ("y", 4, 7), ("z", 8, 7)], 12, 4, 4, False, org.tobytes()))
+        put("pointcloud2_ros1", "float64_be_16.ros1", cloud1([("z", 0, 8), ("x", 8, 8), ("y", 16, 8)], 24, 1, 16, True, be.tobytes()))
     except ImportError:
         print("rosbags or numpy missing: no pointcloud2 seeds (pip install rosbags numpy)")
 

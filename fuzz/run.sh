@@ -16,7 +16,7 @@ minutes=${1:-10}
 jobs=${JOBS:-$(nproc)}
 out=${OUT:-out}
 # TARGETS="pcd npy" runs some of them; QUERY=0 leaves the query-string harness out.
-read -r -a targets <<<"${TARGETS:-pcd npy kitti_bin labels_json calibration_yaml kitti_txt pointcloud2}"
+read -r -a targets <<<"${TARGETS:-pcd npy kitti_bin labels_json calibration_yaml kitti_txt pointcloud2 pointcloud2_ros1}"
 query=${QUERY:-1}
 
 if ! cargo afl --version >/dev/null 2>&1; then

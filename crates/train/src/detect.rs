@@ -8,7 +8,7 @@
 //! ```
 //!
 //! `<name>` is a file's stem, a file's path under a folder given (without extension), or
-//! `<sequence>/<frame>` for a tree's frames. A recording (`.mcap`, `--topic`) is one input whose
+//! `<sequence>/<frame>` for a tree's frames. A recording (`.mcap`, `.db3`, `.bag`, a ROS 2 bag folder; `--topic`) is one input whose
 //! messages are frames: `<name>/<index>` (index from 0 in the file's order), and `OUT/<name>.jsonl`
 //! holds one report per line with each message's stamp and frame id; `--mcap OUT.mcap` writes the
 //! clouds and the people for Foxglove (`scene`). The service (`serve`)
@@ -27,7 +27,7 @@ use indicatif::ProgressBar;
 use serde::{Deserialize, Serialize};
 
 use crate::detector::RunDetector;
-use crate::recording::{Recording, is_recording};
+use crate::recording::{Recording, bag_folder_files, is_recording};
 use crate::scene::SceneWriter;
 use data_jrdb::cloud::ReadLimits;
 use crate::progress;
@@ -232,6 +232,17 @@ fn add_path(p: &Path, inputs: &mut Vec<Input>) -> Result<()> {
         inputs.push(Input { source, name });
         return Ok(());
     }
+    let bag = bag_folder_files(p)?;
+    if !bag.is_empty() {
+        // A ROS 2 bag folder: its storage files, each a recording named after the folder.
+        let folder = p.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "bag".into());
+        let one = bag.len() == 1;
+        for f in bag {
+            let name = if one { folder.clone() } else { format!("{folder}/{}", f.file_stem().unwrap_or_default().to_string_lossy()) };
+            inputs.push(Input { source: Source::Recording(f), name });
+        }
+        return Ok(());
+    }
     if Layout::resolve(p).is_ok() {
         let cfg = DatasetConfig { split: Split::TrainVal, require_labels: false, ..Default::default() };
         let ds = Arc::new(Dataset::open(p, &cfg).with_context(|| format!("{}: reading the JRDB-format tree", p.display()))?);
@@ -323,7 +334,7 @@ pub fn detect(detector: &RunDetector, inputs: &[Input], opts: &DetectOptions) ->
         }
     }
     if let Some(out) = &opts.mcap {
-        ensure!(inputs.iter().all(|i| matches!(i.source, Source::Recording(_))), "--mcap {}: every input must be a recording (.mcap)", out.display());
+        ensure!(inputs.iter().all(|i| matches!(i.source, Source::Recording(_))), "--mcap {}: every input must be a recording (.mcap, .db3 or .bag)", out.display());
     }
     let mut scene = opts.mcap.as_deref().map(SceneWriter::create).transpose()?;
     let pb = if opts.verbose && frames > 1 { progress::bar(frames, "detect") } else { ProgressBar::hidden() };
@@ -333,7 +344,10 @@ pub fn detect(detector: &RunDetector, inputs: &[Input], opts: &DetectOptions) ->
     for input in inputs {
         if let Source::Recording(p) = &input.source {
             let r = recordings.next().expect("one opened per recording input");
-            if let Err(e) = detect_recording(detector, &r, input, opts, &pb, &mut summary, scene.as_mut()) {
+            // A panic in a storage crate fails this recording alone.
+            let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| detect_recording(detector, &r, input, opts, &pb, &mut summary, scene.as_mut())))
+                .unwrap_or_else(|payload| Err(anyhow::anyhow!("reading the recording failed: {}", panic_message(&*payload))));
+            if let Err(e) = outcome {
                 pb.suspend(|| eprintln!("skipped the rest of {}: {e:#}", p.display()));
                 summary.failed.push((p.display().to_string(), format!("{e:#}")));
             }

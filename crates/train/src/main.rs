@@ -509,7 +509,12 @@ fn main() -> ExitCode {
         })(),
         Some(Cmd::Detect { paths, model, out, render, topic, list_topics, mcap }) => (|| -> Result<()> {
             if list_topics {
+                let mut files = Vec::new();
                 for p in &paths {
+                    let bag = train::recording::bag_folder_files(p)?;
+                    if bag.is_empty() { files.push(p.clone()) } else { files.extend(bag) }
+                }
+                for p in &files {
                     for t in train::recording::Recording::open(p)?.topics()? {
                         println!("{}\t{}\t{}\t{}\t{}", p.display(), t.name, t.schema, t.encoding, t.messages.map_or_else(|| "?".into(), |n| n.to_string()));
                     }

@@ -12,6 +12,7 @@ use data_jrdb::pointcloud2::Stamp;
 use serde_json::json;
 
 use crate::detect::BoxRecord;
+use crate::recording::Channel;
 
 /// The topic of the people.
 pub const PEOPLE_TOPIC: &str = "/pmunet/people";
@@ -62,15 +63,15 @@ impl SceneWriter {
     }
 
     /// Copies a recording's message, on a channel like its own.
-    pub fn copy(&mut self, channel: &mcap::Channel, log_time: u64, publish_time: u64, data: &[u8]) -> Result<()> {
+    pub fn copy(&mut self, channel: &Channel, log_time: u64, publish_time: u64, data: &[u8]) -> Result<()> {
         let id = match self.clouds.get(&channel.topic) {
             Some(&id) => id,
             None => {
                 let schema = match &channel.schema {
-                    Some(s) => self.w.add_schema(&s.name, &s.encoding, &s.data)?,
+                    Some((name, encoding, text)) => self.w.add_schema(name, encoding, text)?,
                     None => 0,
                 };
-                let id = self.w.add_channel(schema, &channel.topic, &channel.message_encoding, &channel.metadata)?;
+                let id = self.w.add_channel(schema, &channel.topic, &channel.message_encoding, &BTreeMap::new())?;
                 self.clouds.insert(channel.topic.clone(), id);
                 id
             }
