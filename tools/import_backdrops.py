@@ -13,8 +13,19 @@ Writes OUT/<name>.npy (N x 3 float32) and OUT/backdrops.csv (file, sensor, sourc
                    0.3 m of a Pedestrian, Person_sitting or Cyclist box are removed; KITTI labels
                    only the front camera's view, so a person elsewhere would stay (none seen).
 
+  --labelled DIR   a folder of fetched repositories (`fetch`'s /work/.mirror, bare git dirs named
+                   owner+name) holding per-point labelled scans (LABELLED below: SemanticKITTI
+                   sample frames, HDL-64E; RELLIS-3D frames, a first-generation Ouster OS1-64 at
+                   2048 columns on an off-road robot). Every point of a person class (SemanticKITTI
+                   30-32 and their moving 253-255; RELLIS 17), any point within 0.3 m of one, and
+                   no-return (0, 0, 0) points are removed; RELLIS's robot's own returns (within
+                   2.5 m) too. Needs scipy.
+  --balance        list each place's scans so every place gets an equal share of the sequences
+                   (the simulator takes backdrops.csv's rows in turn): without it the 50 motorway
+                   frames would be most of them.
+
 Never use the scans `real-scans/` scores on: they are the yardstick.
-    python3 tools/import_backdrops.py OUT --aimotive A --kitti K
+    python3 tools/import_backdrops.py OUT --aimotive A --kitti K [--labelled /work/.mirror --balance]
 """
 import argparse
 import glob
@@ -89,11 +100,76 @@ def kitti(root, out, rows, margin=0.3):
         rows.append((name + ".npy", "hdl64e", f"kitti_object_vis@{commit(root)[:12]}:{os.path.relpath(f, root)} ({removed} people's points removed)"))
 
 
+# (repository, commit, [(scan, labels)], scheme, sensor, place). Licences: KITTI CC BY-NC-SA 3.0,
+# SemanticKITTI labels CC BY-NC-SA 4.0, RELLIS-3D CC BY-NC-SA 3.0 (non-commercial).
+LABELLED = [
+    ("makeOneBugEveryday+SemanticKITTI-visualizer", "13fe63a8697827943d336659081f3a6df62df61b",
+     [(f"src/example/pcd/00000{i}.bin", f"src/example/label/00000{i}.label") for i in range(3)], "semantickitti", "hdl64e", "semantickitti-00"),
+    ("mit-han-lab+spvnas", "5c53224ca685844eb27caedf22817a89233ac0ce", [("assets/000000.bin", "assets/000000.label")], "semantickitti", "hdl64e", "semantickitti-spvnas"),
+    ("keonhee-han+semantickitti_KI_DT", "869fc6d1fa0ce3c61f6c26ba26d5f4aa06b42c12", [("baselines/test/000964.bin", "baselines/test/000964.label")], "semantickitti", "hdl64e", "semantickitti-07"),
+    ("unmannedlab+RELLIS-3D", "c17a118fcaed1559f03cc32cc3a91dedc557f8b8", [("utils/example/000104.bin", "utils/example/000104.label")], "rellis", "os1-64-gen1", "rellis-00000"),
+    ("rsasaki0109+CloudAnalyzer", "da3399446a262d50f139e488a8e4981da22c7d48",
+     [("demo_assets/public/rellis3d-frame-000001/os1_cloud_node_kitti_bin/000001.bin", "demo_assets/public/rellis3d-frame-000001/os1_cloud_node_semantickitti_label_id/000001.label")],
+     "rellis", "os1-64-gen1", "rellis-00000"),
+]
+PERSON = {"semantickitti": {30, 31, 32, 253, 254, 255}, "rellis": {17}}
+SELF_RANGE = {"semantickitti": 0.0, "rellis": 2.5}
+
+
+def git_show(mirror, commit_, path):
+    git_dir = mirror if os.path.isdir(os.path.join(mirror, "objects")) else os.path.join(mirror, "repo")
+    return subprocess.run(["git", "--git-dir", git_dir, "show", f"{commit_}:{path}"], capture_output=True, check=True).stdout
+
+
+def labelled(mirrors, out, rows, margin=0.3):
+    from scipy.spatial import cKDTree
+
+    for repo, commit_, files, scheme, sensor, place in LABELLED:
+        mirror = os.path.join(mirrors, repo)
+        if not os.path.exists(mirror):
+            raise SystemExit(f"{mirror}: missing (fetch github:{repo.replace('+', '/')} first)")
+        for scan, label in files:
+            p = np.frombuffer(git_show(mirror, commit_, scan), np.float32).reshape(-1, 4)[:, :3]
+            sem = np.frombuffer(git_show(mirror, commit_, label), np.uint32) & 0xFFFF
+            if len(p) != len(sem):
+                raise SystemExit(f"{repo}:{scan}: {len(p)} points but {len(sem)} labels")
+            person = np.isin(sem, list(PERSON[scheme]))
+            keep = (np.abs(p).sum(1) > 0) & (np.linalg.norm(p, axis=1) >= SELF_RANGE[scheme]) & ~person
+            if person.any():
+                d, _ = cKDTree(p[person]).query(p[keep], distance_upper_bound=margin)
+                keep[np.nonzero(keep)[0][np.isfinite(d)]] = False
+            name = f"{place}-{os.path.basename(scan)[:-4]}"
+            np.save(os.path.join(out, name + ".npy"), p[keep].astype(np.float32))
+            rows.append((name + ".npy", sensor, f"{repo.replace('+', '/')}@{commit_[:12]}:{scan} ({int(person.sum())} person-class points removed)"))
+
+
+def place(row):
+    """The place a backdrop shows: a KITTI object frame is its own; a sequence's frames share one."""
+    name = row[0]
+    if name.startswith("aimotive-"):
+        return "aimotive"
+    if name.startswith("kitti-"):
+        return name
+    return name.rsplit("-", 1)[0]
+
+
+def balanced(rows):
+    """Each place's scans repeated so the places weigh alike, interleaved place by place."""
+    places = {}
+    for r in rows:
+        places.setdefault(place(r), []).append(r)
+    most = max(len(v) for v in places.values())
+    lists = [[v[i % len(v)] for i in range(most)] for v in places.values()]
+    return [l[i] for i in range(most) for l in lists]
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("out")
     ap.add_argument("--aimotive")
     ap.add_argument("--kitti")
+    ap.add_argument("--labelled", metavar="MIRRORS")
+    ap.add_argument("--balance", action="store_true")
     a = ap.parse_args()
     os.makedirs(a.out, exist_ok=True)
     rows = []
@@ -101,8 +177,12 @@ def main():
         aimotive(a.aimotive, a.out, rows)
     if a.kitti:
         kitti(a.kitti, a.out, rows)
+    if a.labelled:
+        labelled(a.labelled, a.out, rows)
     if not rows:
-        raise SystemExit("nothing to import: give --aimotive and/or --kitti")
+        raise SystemExit("nothing to import: give --aimotive, --kitti and/or --labelled")
+    if a.balance:
+        rows = balanced(rows)
     with open(os.path.join(a.out, "backdrops.csv"), "w") as f:
         f.write("file,sensor,source\n")
         for r in rows:

@@ -33,11 +33,14 @@ pub enum SensorModel {
     Pandar64,
     /// Hesai Pandar128: 128 beams, −25° to +15°, 0.125° apart from −6° to +2°.
     Pandar128,
+    /// Ouster OS1-64 of the first generation at 2048 columns: 64 beams, ±16.6° uniform (RELLIS-3D's
+    /// robot-mounted backdrops; no `bench-v2` rig draws it).
+    Os1_64Gen1,
 }
 
 impl SensorModel {
     /// Every model, in the order above.
-    pub const ALL: [SensorModel; 11] = [
+    pub const ALL: [SensorModel; 12] = [
         SensorModel::Vlp16,
         SensorModel::Hdl32e,
         SensorModel::Vlp32c,
@@ -49,6 +52,7 @@ impl SensorModel {
         SensorModel::Os0_128,
         SensorModel::Pandar128,
         SensorModel::Pandar64,
+        SensorModel::Os1_64Gen1,
     ];
 
     /// Its name in statistics and file names.
@@ -65,6 +69,7 @@ impl SensorModel {
             SensorModel::Os0_128 => "os0-128",
             SensorModel::Pandar128 => "pandar128",
             SensorModel::Pandar64 => "pandar64",
+            SensorModel::Os1_64Gen1 => "os1-64-gen1",
         }
     }
 
@@ -94,6 +99,7 @@ impl SensorModel {
                 e
             }
             SensorModel::Os1_64 => uniform(-22.5, 22.5, 64),
+            SensorModel::Os1_64Gen1 => uniform(-16.6, 16.6, 64),
             SensorModel::Os1_128 => uniform(-22.5, 22.5, 128),
             SensorModel::Os0_128 => uniform(-45.0, 45.0, 128),
             SensorModel::Pandar64 => {
@@ -127,6 +133,7 @@ impl SensorModel {
             SensorModel::Hdl64e => (2000, 100.0, 0.02),
             SensorModel::Os1_64 | SensorModel::Os1_128 => (1024, 100.0, 0.015),
             SensorModel::Os0_128 => (1024, 50.0, 0.02),
+            SensorModel::Os1_64Gen1 => (2048, 100.0, 0.015),
             SensorModel::Pandar128 | SensorModel::Pandar64 => (1800, 100.0, 0.02),
         };
         Scanner { columns, max_range, range_noise, ..Scanner::default() }
@@ -157,6 +164,7 @@ mod tests {
             (SensorModel::Os0_128, 128, -45.0, 45.0),
             (SensorModel::Pandar128, 128, -25.0, 15.0),
             (SensorModel::Pandar64, 64, -25.0, 15.0),
+            (SensorModel::Os1_64Gen1, 64, -16.6, 16.6),
         ] {
             let e = m.elevations_deg();
             assert_eq!(e.len(), n, "{}", m.name());
