@@ -34,7 +34,7 @@ pub mod detector;
 pub mod detect;
 /// The facing stage of a checkpoint, fitted on its own boxes.
 pub mod facing;
-/// MCAP recordings (ROS 2 bags) of point clouds, read message by message.
+/// Recordings of point clouds (MCAP, ROS 2 SQLite bags, ROS 1 bags), read message by message.
 pub mod recording;
 /// Detections as an MCAP scene Foxglove and Lichtblick open.
 pub mod scene;

@@ -176,7 +176,7 @@ enum Cmd {
         write: bool,
     },
     /// Detect people in point-cloud files (PCD, KITTI .bin, nuScenes .pcd.bin, .npy), folders of them, glob patterns,
-    /// JRDB-format trees or recordings (.mcap with --topic); write OUT/json/NAME.json,
+    /// JRDB-format trees or recordings (.mcap, .db3, .bag or a ROS 2 bag folder, with --topic); write OUT/json/NAME.json,
     /// OUT/kitti/NAME.txt and with --render OUT/render/NAME.png per frame (a recording's frames
     /// are NAME/INDEX, and OUT/NAME.jsonl holds a line per message with its stamp).
     Detect {
@@ -191,7 +191,7 @@ enum Cmd {
         /// Also draw each frame as a bird's-eye-view PNG (JRDB's base frame).
         #[arg(long)]
         render: bool,
-        /// The topic of sensor_msgs/msg/PointCloud2 messages in a recording (.mcap).
+        /// The topic of PointCloud2 messages in a recording (.mcap, .db3, .bag).
         #[arg(long)]
         topic: Option<String>,
         /// Only list each recording's topics (name, schema, encoding, messages).
