@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use crate::box3d::Box3d;
 use crate::calibration::{Calibration, Lidar};
-use crate::cloud::read_cloud;
+use crate::cloud::{CloudFormat, parse_cloud};
 use crate::error::{DataError, ErrorKind, Result};
 use crate::kitti::{CameraView, KittiOptions};
 use crate::labels::{Label, read_labels};
@@ -103,6 +103,8 @@ pub enum FrameSource {
     Cloud {
         /// The file.
         path: PathBuf,
+        /// Its format (the dataset's, whatever the file's name says).
+        format: CloudFormat,
         /// Its sensor frame → the base frame.
         to_base: Rigid,
         /// The camera whose view alone is labelled (KITTI), if the points are cropped to it.
@@ -252,8 +254,9 @@ impl Dataset {
                 points.extend(lo.xyz.iter().map(|&p| tl.to_base(p)));
                 (points, up.xyz.len(), up.dropped_non_finite + lo.dropped_non_finite)
             }
-            FrameSource::Cloud { path, to_base, view } => {
-                let cloud = read_cloud(path)?;
+            FrameSource::Cloud { path, format, to_base, view } => {
+                let bytes = std::fs::read(path).map_err(|e| DataError::io(path, e))?;
+                let cloud = parse_cloud(&bytes, *format).map_err(|kind| DataError::new(path, kind))?;
                 let mut points: Vec<[f32; 3]> = cloud.points.iter().map(|&p| to_base.apply_f32(p)).collect();
                 if let Some(view) = view {
                     points.retain(|&p| view.sees(p));

@@ -18,6 +18,7 @@
 use std::path::{Path, PathBuf};
 
 use crate::box3d::Box3d;
+use crate::cloud::CloudFormat;
 use crate::dataset::{DatasetConfig, FrameRef, FrameSource, OnBadFrame};
 use crate::error::{DataError, ErrorKind, Result};
 use crate::labels::Label;
@@ -80,14 +81,20 @@ impl KittiCalib {
     pub fn parse(text: &str) -> std::result::Result<Self, (String, String)> {
         let find = |names: &[&str], n: usize| -> std::result::Result<Vec<f64>, (String, String)> {
             for line in text.lines() {
-                let Some((key, rest)) = line.split_once(':') else { continue };
+                // `KEY: values` in the object benchmark; `KEY values` in the tracking one.
+                let line = line.trim_start();
+                let cut = line.find(|c: char| c == ':' || c.is_whitespace()).unwrap_or(line.len());
+                let (key, rest) = (&line[..cut], line[cut..].trim_start_matches(':'));
                 if names.contains(&key.trim()) {
                     let v: Vec<f64> = rest
                         .split_whitespace()
                         .map(|t| t.parse::<f64>().map_err(|_| (key.trim().to_string(), format!("`{t}` is not a number"))))
                         .collect::<std::result::Result<_, _>>()?;
-                    if v.len() != n || v.iter().any(|x| !x.is_finite()) {
-                        return Err((key.trim().to_string(), format!("expected {n} finite numbers, found {}", v.len())));
+                    if v.len() != n {
+                        return Err((key.trim().to_string(), format!("expected {n} numbers, found {}", v.len())));
+                    }
+                    if v.iter().any(|x| !x.is_finite()) {
+                        return Err((key.trim().to_string(), "a value is not finite".into()));
                     }
                     return Ok(v);
                 }
@@ -98,7 +105,16 @@ impl KittiCalib {
         let r = find(&["R0_rect", "R_rect"], 9)?;
         let r0_rect = Rigid { rotation: [[r[0], r[1], r[2]], [r[3], r[4], r[5]], [r[6], r[7], r[8]]], translation: [0.0; 3] };
         let velo_to_cam = Rigid::from_matrix_3x4(&find(&["Tr_velo_to_cam", "Tr_velo_cam"], 12)?);
-        Ok(Self { p2, r0_rect, velo_to_cam })
+        let calib = Self { p2, r0_rect, velo_to_cam };
+        // Both are rotations: a determinant far from 1 is a damaged file, and its inverse NaN.
+        for (key, r) in [("R0_rect", &calib.r0_rect), ("Tr_velo_to_cam", &calib.velo_to_cam)] {
+            let m = &r.rotation;
+            let det = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0]) + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
+            if (det - 1.0).abs() > 0.01 {
+                return Err((key.to_string(), format!("its rotation's determinant is {det:.4}, not 1")));
+            }
+        }
+        Ok(calib)
     }
 
     /// The file's text, every matrix KITTI's readers look for (P0–P3 all `P2`, `Tr_imu_to_velo`
@@ -191,7 +207,12 @@ pub fn parse_labels(text: &str, calib: &KittiCalib) -> std::result::Result<Vec<K
             .collect::<std::result::Result<_, _>>()?;
         let kind = t[0].to_string();
         let [h, w, l, x, y, z, ry] = [v[7], v[8], v[9], v[10], v[11], v[12], v[13]];
-        let bbox = if kind == "DontCare" || h <= 0.0 || w <= 0.0 || l <= 0.0 {
+        let bbox = if kind == "DontCare" {
+            None
+        } else if h <= 0.0 || w <= 0.0 || l <= 0.0 {
+            if role(&kind) != KittiRole::Other {
+                return Err((at, format!("a {kind} with a size that is not positive (h {h}, w {w}, l {l})")));
+            }
             None
         } else {
             if ![h, w, l, x, y, z, ry].iter().all(|x| x.is_finite()) {
@@ -235,7 +256,7 @@ pub fn label_line(kind: &str, b: &Box3d, calib: &KittiCalib, image: [u32; 2]) ->
     let bb = if behind {
         [-1.0; 4]
     } else {
-        let (wd, ht) = (image[0] as f64 - 1.0, image[1] as f64 - 1.0);
+        let (wd, ht) = (image[0].max(1) as f64 - 1.0, image[1].max(1) as f64 - 1.0);
         [bb[0].clamp(0.0, wd), bb[1].clamp(0.0, ht), bb[2].clamp(0.0, wd), bb[3].clamp(0.0, ht)]
     };
     format!(
@@ -277,7 +298,11 @@ fn split_file(root: &Path, data: &Path, name: &str) -> Option<PathBuf> {
 
 fn read_split(path: &Path) -> Result<Vec<String>> {
     let text = std::fs::read_to_string(path).map_err(|e| DataError::io(path, e))?;
-    Ok(text.lines().map(str::trim).filter(|l| !l.is_empty()).map(String::from).collect())
+    let names: Vec<String> = text.lines().map(str::trim).filter(|l| !l.is_empty()).map(String::from).collect();
+    if names.is_empty() {
+        return Err(DataError::new(path, ErrorKind::Layout("lists no frames".into())));
+    }
+    Ok(names)
 }
 
 /// Image width and height from a PNG's IHDR chunk, if the file is a PNG.
@@ -288,7 +313,9 @@ fn png_size(path: &Path) -> Option<[u32; 2]> {
     if &head[..8] != b"\x89PNG\r\n\x1a\n" || &head[12..16] != b"IHDR" {
         return None;
     }
-    Some([u32::from_be_bytes(head[16..20].try_into().ok()?), u32::from_be_bytes(head[20..24].try_into().ok()?)])
+    let size = [u32::from_be_bytes(head[16..20].try_into().ok()?), u32::from_be_bytes(head[20..24].try_into().ok()?)];
+    // PNG allows 1 to 2³¹ − 1 pixels a side.
+    size.iter().all(|&v| (1..=i32::MAX as u32).contains(&v)).then_some(size)
 }
 
 /// Lists the frames of `cfg.split`: `ImageSets/train.txt` or `val.txt`, every frame of
@@ -328,7 +355,7 @@ pub fn list_frames(root: &Path, cfg: &DatasetConfig) -> Result<(Vec<FrameRef>, V
     let sequence = "training".to_string();
     let mut frames = Vec::with_capacity(names.len());
     for name in names {
-        match frame(&data, &name, &opts) {
+        match frame(&data, &name, &opts, cfg.require_labels) {
             Ok(f) => frames.push(f),
             Err(e) if cfg.on_bad_frame == OnBadFrame::Skip => eprintln!("warning: skipping: {e}"),
             Err(e) => return Err(e),
@@ -337,7 +364,7 @@ pub fn list_frames(root: &Path, cfg: &DatasetConfig) -> Result<(Vec<FrameRef>, V
     Ok((frames, vec![sequence]))
 }
 
-fn frame(data: &Path, name: &str, opts: &KittiOptions) -> Result<FrameRef> {
+fn frame(data: &Path, name: &str, opts: &KittiOptions, require_labels: bool) -> Result<FrameRef> {
     let path = data.join("velodyne").join(format!("{name}.bin"));
     if !path.is_file() {
         return Err(DataError::new(&path, ErrorKind::Layout("listed in the split file but missing".into())));
@@ -347,6 +374,9 @@ fn frame(data: &Path, name: &str, opts: &KittiOptions) -> Result<FrameRef> {
     let to_base = opts.velo_to_base();
     let label_path = data.join("label_2").join(format!("{name}.txt"));
     let (mut labels, mut ignored) = (Vec::new(), Vec::new());
+    if !label_path.is_file() && require_labels {
+        return Err(DataError::new(&label_path, ErrorKind::Layout("missing (a frame without labels would train as one without people)".into())));
+    }
     if label_path.is_file() {
         let text = std::fs::read_to_string(&label_path).map_err(|e| DataError::io(&label_path, e))?;
         let parsed = parse_labels(&text, &calib).map_err(|(key, what)| DataError::key(&label_path, key, what))?;
@@ -368,7 +398,7 @@ fn frame(data: &Path, name: &str, opts: &KittiOptions) -> Result<FrameRef> {
     Ok(FrameRef {
         sequence: "training".into(),
         name: name.to_string(),
-        source: FrameSource::Cloud { path, to_base, view },
+        source: FrameSource::Cloud { path, format: CloudFormat::KittiBin, to_base, view },
         labels,
         ignored,
         count_points: true,
@@ -425,6 +455,15 @@ Tr_velo_to_cam: 7.533745000000e-03 -9.999714000000e-01 -6.166020000000e-04 -4.06
         assert!(view.sees([10.0, 0.0, -0.5]));
         assert!(!view.sees([-10.0, 0.0, -0.5]));
         assert!(!view.sees([2.0, 10.0, -0.5]), "90° to the left is outside a 80° image");
+    }
+
+    #[test]
+    fn the_tracking_benchmarks_calibration_reads_the_same() {
+        // The tracking benchmark writes `R_rect` and `Tr_velo_cam` without colons.
+        let tracking = CALIB_000000.replace("R0_rect:", "R_rect").replace("Tr_velo_to_cam:", "Tr_velo_cam").replace("P2:", "P2");
+        assert_eq!(KittiCalib::parse(&tracking).unwrap(), KittiCalib::parse(CALIB_000000).unwrap());
+        let bad = CALIB_000000.replace("R0_rect: 9.999239000000e-01", "R0_rect: 3.0");
+        assert!(KittiCalib::parse(&bad).unwrap_err().1.contains("determinant"));
     }
 
     #[test]

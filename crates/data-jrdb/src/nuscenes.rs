@@ -20,6 +20,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::box3d::Box3d;
+use crate::cloud::CloudFormat;
 use crate::dataset::{DatasetConfig, FrameRef, FrameSource, OnBadFrame};
 use crate::error::{DataError, ErrorKind, Result};
 use crate::kitti::BASE_FLOOR_DEPTH;
@@ -92,13 +93,20 @@ pub struct Scene {
     pub description: String,
 }
 
+/// Microseconds: an integer in nuScenes, a float in Lyft's release.
+pub type Timestamp = serde_json::Number;
+
+fn micros(t: &Timestamp) -> f64 {
+    t.as_f64().unwrap_or(0.0)
+}
+
 /// `sample.json` rows: key frames.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Sample {
     /// Token.
     pub token: String,
     /// Microseconds.
-    pub timestamp: i64,
+    pub timestamp: Timestamp,
     /// Its scene.
     pub scene_token: String,
     /// Previous key frame or "".
@@ -119,7 +127,7 @@ pub struct SampleData {
     /// Its sensor's calibration.
     pub calibrated_sensor_token: String,
     /// Microseconds.
-    pub timestamp: i64,
+    pub timestamp: Timestamp,
     /// `pcd` for LiDAR.
     pub fileformat: String,
     /// Whether it is the key frame's own.
@@ -151,7 +159,7 @@ pub struct Pose {
     pub rotation: [f64; 4],
     /// Microseconds (ego poses).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub timestamp: Option<i64>,
+    pub timestamp: Option<Timestamp>,
     /// The sensor (calibrated sensors).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sensor_token: Option<String>,
@@ -319,6 +327,11 @@ pub fn list_frames(root: &Path, cfg: &DatasetConfig) -> Result<(Vec<FrameRef>, V
         anns_of.entry(a.sample_token.as_str()).or_default().push(a);
     }
 
+    if let Some(only) = &cfg.sequences
+        && let Some(missing) = only.iter().find(|n| !scenes.iter().any(|s| &s.name == *n))
+    {
+        return Err(DataError::new(dir.join("scene.json"), ErrorKind::Layout(format!("no scene named `{missing}`"))));
+    }
     let mut chosen: Vec<&Scene> = Vec::new();
     for s in &scenes {
         if let Some(only) = &cfg.sequences {
@@ -339,12 +352,18 @@ pub fn list_frames(root: &Path, cfg: &DatasetConfig) -> Result<(Vec<FrameRef>, V
     let mut frames = Vec::new();
     for scene in &chosen {
         let mut keys: Vec<&Sample> = samples.iter().filter(|s| s.scene_token == scene.token).collect();
-        keys.sort_by_key(|s| s.timestamp);
+        keys.sort_by(|a, b| micros(&a.timestamp).total_cmp(&micros(&b.timestamp)));
         for (i, sample) in keys.iter().enumerate() {
             let built = (|| -> Result<FrameRef> {
                 let sd = lidar_of.get(sample.token.as_str()).ok_or_else(|| DataError::key(dir.join("sample_data.json"), format!("sample {}", sample.token), "has no LIDAR_TOP key frame"))?;
                 let cs = calib.get(sd.calibrated_sensor_token.as_str()).ok_or_else(|| by_token(&sd.calibrated_sensor_token, "calibrated_sensor", "calibrated_sensor_token"))?;
                 let pose = ego.get(sd.ego_pose_token.as_str()).ok_or_else(|| by_token(&sd.ego_pose_token, "ego_pose", "ego_pose_token"))?;
+                for (what, q, table) in [("calibrated_sensor", cs.rotation, "calibrated_sensor"), ("ego_pose", pose.rotation, "ego_pose")] {
+                    let n = q.iter().map(|v| v * v).sum::<f64>().sqrt();
+                    if !(n > 1e-6 && n.is_finite()) || cs.translation.iter().chain(&pose.translation).any(|v| !v.is_finite()) {
+                        return Err(DataError::key(dir.join(format!("{table}.json")), format!("{what} {}", if table == "ego_pose" { &pose.token } else { &cs.token }), "rotation is not a unit quaternion or a value is not finite"));
+                    }
+                }
                 let cs_rigid = cs.rigid();
                 let to_base = Rigid { rotation: cs_rigid.rotation, translation: [0.0, 0.0, cs.translation[2] - BASE_FLOOR_DEPTH] };
                 let box_to_base = Rigid::translation([-cs.translation[0], -cs.translation[1], -BASE_FLOOR_DEPTH]).then_after(&pose.rigid().inverse());
@@ -356,15 +375,18 @@ pub fn list_frames(root: &Path, cfg: &DatasetConfig) -> Result<(Vec<FrameRef>, V
                         .and_then(|c| category.get(c))
                         .ok_or_else(|| by_token(&a.instance_token, "instance", &format!("sample_annotation {}", a.token)))?;
                     let [w, l, h] = a.size;
-                    if !(w > 0.0 && l > 0.0 && h > 0.0) {
-                        continue;
+                    let qn = a.rotation.iter().map(|v| v * v).sum::<f64>().sqrt();
+                    if !(w > 0.0 && l > 0.0 && h > 0.0) || !(qn > 1e-6) || a.translation.iter().chain(&a.size).chain(&a.rotation).any(|v| !v.is_finite()) {
+                        return Err(DataError::key(dir.join("sample_annotation.json"), format!("sample_annotation {}", a.token), "a size that is not positive, a rotation that is not a unit quaternion, or a value that is not finite"));
                     }
                     let global = Box3d { cx: a.translation[0], cy: a.translation[1], cz: a.translation[2], l, w, h, rot_z: Rigid::from_quaternion(a.rotation, [0.0; 3]).yaw() };
                     let b = box_to_base.apply_box(&global);
                     match role(cat) {
                         NuscenesRole::Person => {
-                            count_points |= a.num_lidar_pts.is_none();
-                            labels.push(Label { id: format!("{cat}:{}", a.instance_token), bbox: b, num_points: a.num_lidar_pts.unwrap_or(-1), observation_angle: -1.0 });
+                            // Lyft's release writes −1 for "not counted": counted in the cloud then.
+                            let stated = a.num_lidar_pts.filter(|&n| n >= 0);
+                            count_points |= stated.is_none();
+                            labels.push(Label { id: format!("{cat}:{}", a.instance_token), bbox: b, num_points: stated.unwrap_or(-1), observation_angle: -1.0 });
                         }
                         NuscenesRole::Ignored => ignored.push(b),
                         NuscenesRole::Other => {}
@@ -373,7 +395,8 @@ pub fn list_frames(root: &Path, cfg: &DatasetConfig) -> Result<(Vec<FrameRef>, V
                 Ok(FrameRef {
                     sequence: scene.name.clone(),
                     name: format!("{i:06}"),
-                    source: FrameSource::Cloud { path: root.join(&sd.filename), to_base, view: None },
+                    // Lyft names its 5-float clouds `.bin`: the format is the table's, not the name's.
+                    source: FrameSource::Cloud { path: root.join(&sd.filename), format: CloudFormat::NuScenesBin, to_base, view: None },
                     labels,
                     ignored,
                     count_points,
@@ -455,14 +478,14 @@ impl TablesWriter {
         let mut instance_of: HashMap<String, usize> = HashMap::new();
         for (i, (pose, time, boxes)) in frames.iter().enumerate() {
             let pose_token = self.token();
-            self.ego_poses.push(Pose { token: pose_token.clone(), translation: pose.translation, rotation: pose.quaternion(), timestamp: Some(*time), sensor_token: None, camera_intrinsic: None });
+            self.ego_poses.push(Pose { token: pose_token.clone(), translation: pose.translation, rotation: pose.quaternion(), timestamp: Some((*time).into()), sensor_token: None, camera_intrinsic: None });
             let sd_token = self.token();
             self.sample_data.push(SampleData {
                 token: sd_token,
                 sample_token: tokens[i].clone(),
                 ego_pose_token: pose_token,
                 calibrated_sensor_token: self.lidar.token.clone(),
-                timestamp: *time,
+                timestamp: (*time).into(),
                 fileformat: "pcd".into(),
                 is_key_frame: true,
                 height: 0,
@@ -473,7 +496,7 @@ impl TablesWriter {
             });
             self.samples.push(Sample {
                 token: tokens[i].clone(),
-                timestamp: *time,
+                timestamp: (*time).into(),
                 scene_token: scene_token.clone(),
                 prev: if i > 0 { tokens[i - 1].clone() } else { String::new() },
                 next: tokens.get(i + 1).cloned().unwrap_or_default(),

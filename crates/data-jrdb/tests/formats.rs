@@ -54,6 +54,48 @@ fn an_exported_tree_reads_back_as_the_same_frames() {
     }
 }
 
+/// Lyft's level-5 release shares nuScenes' schema with three differences: float timestamps,
+/// `num_lidar_pts` of −1, and 5-float clouds named `.bin`. An export rewritten that way reads the
+/// same, the points counted in the cloud.
+#[test]
+fn a_lyft_style_release_reads_as_nuscenes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let jrdb = tmp.path().join("jrdb");
+    synth(&jrdb, &SynthConfig { sequences: 2, frames: 2, seed: 4, ..Default::default() }).unwrap();
+    let out = tmp.path().join("lyft");
+    export(&open(&jrdb, DatasetFormat::Jrdb, Split::TrainVal), DatasetFormat::Nuscenes, &out, &[VAL.into()]).unwrap();
+    let tables = out.join("v1.0-export");
+    let edit = |name: &str, f: &dyn Fn(&mut serde_json::Value)| {
+        let path = tables.join(format!("{name}.json"));
+        let mut v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+        for row in v.as_array_mut().unwrap() {
+            f(row);
+        }
+        std::fs::write(&path, v.to_string()).unwrap();
+    };
+    let float = |row: &mut serde_json::Value| {
+        let t = row["timestamp"].as_i64().unwrap();
+        row["timestamp"] = serde_json::json!(t as f64 + 0.8);
+    };
+    edit("sample", &float);
+    edit("ego_pose", &float);
+    edit("sample_annotation", &|row| row["num_lidar_pts"] = serde_json::json!(-1));
+    edit("sample_data", &|row| {
+        let old = row["filename"].as_str().unwrap().to_string();
+        let new = old.replace("samples/LIDAR_TOP/", "lidar/").replace(".pcd.bin", ".bin");
+        std::fs::create_dir_all(out.join("lidar")).unwrap();
+        std::fs::rename(out.join(&old), out.join(&new)).unwrap();
+        row["filename"] = serde_json::json!(new);
+    });
+    let (a, b) = (open(&jrdb, DatasetFormat::Jrdb, Split::TrainVal), open(&out, DatasetFormat::Nuscenes, Split::TrainVal));
+    assert_eq!(a.len(), b.len());
+    for i in 0..a.len() {
+        let (fa, fb) = (a.load(i).unwrap(), b.load(i).unwrap());
+        assert_eq!(fa.points.len(), fb.points.len(), "frame {i}");
+        assert_eq!(fa.num_points, fb.num_points, "frame {i}: counted in the cloud");
+    }
+}
+
 #[test]
 fn kitti_keeps_the_cameras_view_and_ignores_cyclists() {
     let tmp = tempfile::tempdir().unwrap();

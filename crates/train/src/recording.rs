@@ -230,7 +230,9 @@ impl Recording {
         for r in bag.index_records() {
             match r.map_err(|e| anyhow!("{}: reading its index: {e}", self.path.display()))? {
                 rosbag::IndexRecord::Connection(c) => {
-                    conns.insert(c.id, (c.topic.to_string(), c.tp.to_string()));
+                    // The topic the bag stores it under (what `rosbag info` shows), which a
+                    // rewritten bag may have changed from the publisher's.
+                    conns.insert(c.id, (c.storage_topic.to_string(), c.tp.to_string()));
                 }
                 rosbag::IndexRecord::ChunkInfo(info) => {
                     for e in info.entries() {
@@ -272,7 +274,9 @@ impl Recording {
         Ok(match &self.storage {
             Storage::Mcap(map) => Box::new(self.mcap_stream(map)?.filter(move |m| m.as_ref().map_or(true, |m| m.channel.topic == topic)).enumerate().map(move |(i, m)| {
                 let m = m.map_err(|e| anyhow!("{}: reading its messages: {e}", path.display()))?;
-                let cloud = decode_cdr(&m.data, limits).map_err(|e| bad(i, e))?;
+                // An MCAP converted from a ROS 1 bag keeps ROS 1's serialization.
+                let decoded = if m.channel.message_encoding == "ros1" { decode_ros1(&m.data, limits) } else { decode_cdr(&m.data, limits) };
+                let cloud = decoded.map_err(|e| bad(i, e))?;
                 let channel = Arc::new(Channel {
                     topic: m.channel.topic.clone(),
                     schema: m.channel.schema.as_ref().map(|s| (s.name.clone(), s.encoding.clone(), s.data.to_vec())),
@@ -288,6 +292,9 @@ impl Recording {
                     .with_context(|| format!("{}: listing the messages on {topic}", path.display()))?;
                 Box::new(ids.into_iter().enumerate().map(move |(i, (id, time))| {
                     let data: Vec<u8> = db.query_row("SELECT data FROM messages WHERE id = ?1", [id], |r| r.get(0)).with_context(|| format!("{}: reading message {i} on {topic}", path.display()))?;
+                    if data.starts_with(&[0x28, 0xb5, 0x2f, 0xfd]) {
+                        bail!("{}: message {i} on {topic} is zstd-compressed (rosbag2's per-message compression): decompress the bag first (`ros2 bag convert`, or rosbags-convert to MCAP)", path.display());
+                    }
                     let cloud = decode_cdr(&data, limits).map_err(|e| bad(i, e))?;
                     Ok(CloudMessage { cloud, log_time: time as u64, publish_time: time as u64, channel: channel.clone(), data: Cow::Owned(data) })
                 }))
@@ -342,11 +349,27 @@ struct Ros1Messages<'a> {
     channels: BTreeMap<u32, Arc<Channel>>,
     pending: VecDeque<(Arc<Channel>, u64, Vec<u8>)>,
     failed: bool,
+    error: Option<rosbag::Error>,
 }
 
 impl<'a> Ros1Messages<'a> {
     fn new(bag: &'a rosbag::RosBag, topic: &'a str) -> Self {
-        Ros1Messages { chunks: bag.chunk_records(), topic, channels: BTreeMap::new(), pending: VecDeque::new(), failed: false }
+        let mut channels = BTreeMap::new();
+        // The index's connection records (checked present by `check_ros1_index`); the chunks'
+        // own copies are read too, for a bag whose index omits some.
+        for r in bag.index_records().flatten() {
+            if let rosbag::IndexRecord::Connection(c) = r {
+                learn(&mut channels, &c, topic);
+            }
+        }
+        Ros1Messages { chunks: bag.chunk_records(), topic, channels, pending: VecDeque::new(), failed: false, error: None }
+    }
+}
+
+fn learn(channels: &mut BTreeMap<u32, Arc<Channel>>, c: &rosbag::record_types::Connection<'_>, topic: &str) {
+    if c.storage_topic == topic && !channels.contains_key(&c.id) {
+        let schema = Some((c.tp.to_string(), "ros1msg".to_string(), c.message_definition.as_bytes().to_vec()));
+        channels.insert(c.id, Arc::new(Channel { topic: topic.to_string(), schema, message_encoding: "ros1".into() }));
     }
 }
 
@@ -357,6 +380,9 @@ impl Iterator for Ros1Messages<'_> {
         loop {
             if let Some(m) = self.pending.pop_front() {
                 return Some(Ok(m));
+            }
+            if let Some(e) = self.error.take() {
+                return Some(Err(e));
             }
             if self.failed {
                 return None;
@@ -371,20 +397,17 @@ impl Iterator for Ros1Messages<'_> {
             };
             for m in chunk.messages() {
                 match m {
-                    Ok(rosbag::MessageRecord::Connection(c)) if c.topic == self.topic => {
-                        let schema = Some((c.tp.to_string(), "ros1msg".to_string(), c.message_definition.as_bytes().to_vec()));
-                        self.channels.insert(c.id, Arc::new(Channel { topic: c.topic.to_string(), schema, message_encoding: "ros1".into() }));
-                    }
+                    Ok(rosbag::MessageRecord::Connection(c)) => learn(&mut self.channels, &c, self.topic),
                     Ok(rosbag::MessageRecord::MessageData(d)) => {
                         if let Some(ch) = self.channels.get(&d.conn_id) {
                             self.pending.push_back((ch.clone(), d.time, d.data.to_vec()));
                         }
                     }
-                    Ok(_) => {}
                     Err(e) => {
+                        // The messages read before the damage still come, then the error.
                         self.failed = true;
-                        self.pending.clear();
-                        return Some(Err(e));
+                        self.error = Some(e);
+                        break;
                     }
                 }
             }

@@ -108,6 +108,14 @@ fn the_scene_mcap_holds_the_clouds_and_the_boxes_of_the_json() {
             }
         }
         assert_eq!((clouds, updates.len()), (2, 2));
+        // The scene is itself a recording: read back (ROS 1 clouds in an MCAP included), its
+        // clouds give the same boxes.
+        let again = tmp.path().join("again");
+        ok(&["detect", scene.to_str().unwrap(), "--topic", "/velodyne_points", "--out", again.to_str().unwrap(), "--score-threshold", "0.05"]);
+        for i in 0..2 {
+            let (a, b) = (report(&out.join(format!("json/{name}/{i:06}.json"))), report(&again.join(format!("json/scene/{i:06}.json"))));
+            assert_eq!((a.points, a.detections), (b.points, b.detections), "{name}: message {i} read back from the scene");
+        }
         assert!(updates.iter().all(|u| !u["entities"][0]["cubes"].as_array().unwrap().is_empty()), "boxes to compare");
         for (i, u) in updates.iter().enumerate() {
             let want = report(&out.join(format!("json/{name}/{i:06}.json")));
