@@ -109,7 +109,13 @@ pub fn bag_folder_files(dir: &Path) -> Result<Vec<PathBuf>> {
             files.push(p);
         }
     }
-    files.sort();
+    // rosbag2 numbers split files `<bag>_0.db3`, `<bag>_1.db3`, …: `_10` after `_9`.
+    files.sort_by_key(|p| {
+        let stem = p.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+        let digits = stem.len() - stem.trim_end_matches(|c: char| c.is_ascii_digit()).len();
+        let (head, tail) = stem.split_at(stem.len() - digits);
+        (head.to_string(), tail.parse::<u64>().unwrap_or(0), p.clone())
+    });
     Ok(files)
 }
 
@@ -193,12 +199,17 @@ impl Recording {
         if let Some(summary) = mcap::Summary::read(map).ok().flatten().filter(|s| !s.channels.is_empty()) {
             let counts = summary.stats.as_ref().map(|s| &s.channel_message_counts);
             for (id, ch) in &summary.channels {
-                topics.push(Topic {
-                    name: ch.topic.clone(),
-                    schema: ch.schema.as_ref().map_or_else(String::new, |s| s.name.clone()),
-                    encoding: ch.message_encoding.clone(),
-                    messages: counts.and_then(|c| c.get(id).copied()),
-                });
+                let n = counts.and_then(|c| c.get(id).copied());
+                // Several channels may share a topic (one per publisher): one row, their sum.
+                match topics.iter_mut().find(|t| t.name == ch.topic) {
+                    Some(t) => t.messages = t.messages.zip(n).map(|(a, b)| a + b),
+                    None => topics.push(Topic {
+                        name: ch.topic.clone(),
+                        schema: ch.schema.as_ref().map_or_else(String::new, |s| s.name.clone()),
+                        encoding: ch.message_encoding.clone(),
+                        messages: n,
+                    }),
+                }
             }
         } else {
             for m in self.mcap_stream(map)? {

@@ -48,7 +48,8 @@ pub struct SceneWriter {
     path: PathBuf,
     w: mcap::Writer<BufWriter<std::fs::File>>,
     people: u16,
-    clouds: BTreeMap<String, u16>,
+    /// Output channels by (topic, encoding): a `.bag` and an `.mcap` on one topic get two.
+    clouds: BTreeMap<(String, String), u16>,
     sequence: u32,
 }
 
@@ -64,7 +65,8 @@ impl SceneWriter {
 
     /// Copies a recording's message, on a channel like its own.
     pub fn copy(&mut self, channel: &Channel, log_time: u64, publish_time: u64, data: &[u8]) -> Result<()> {
-        let id = match self.clouds.get(&channel.topic) {
+        let key = (channel.topic.clone(), channel.message_encoding.clone());
+        let id = match self.clouds.get(&key) {
             Some(&id) => id,
             None => {
                 let schema = match &channel.schema {
@@ -72,7 +74,7 @@ impl SceneWriter {
                     None => 0,
                 };
                 let id = self.w.add_channel(schema, &channel.topic, &channel.message_encoding, &BTreeMap::new())?;
-                self.clouds.insert(channel.topic.clone(), id);
+                self.clouds.insert(key, id);
                 id
             }
         };
