@@ -10,6 +10,7 @@ use common::{metrics_without_times, ok as train_bin, results_without_times};
 use train::metrics::Table;
 
 fn tiny_config(dir: &Path, data: &Path, extra: &str) -> std::path::PathBuf {
+    let training = common::tiny_model_and_training("");
     let text = format!(
         r#"seed = 3
 backend = "flex"
@@ -24,18 +25,7 @@ sequences = 2
 frames = 4
 seed = 1
 max_people = 8
-[model]
-kind = "person_minkunet"
-width = 0.125
-[train]
-batch_size = 1
-[train.schedule]
-kind = "exp_decay"
-lr0 = 1e-3
-epoch0 = 1.0
-lr1 = 1e-4
-epoch1 = 3.0
-[eval]
+{training}[eval]
 frame_stride = 2
 {extra}
 "#,

@@ -11,6 +11,7 @@ use data_jrdb::sim::{SynthConfig, synth};
 const VAL: &str = "clark-center-2019-02-28_1";
 
 fn config(dir: &Path, name: &str, data: &str) -> std::path::PathBuf {
+    let training = common::tiny_model_and_training("");
     let text = format!(
         r#"seed = 3
 backend = "flex"
@@ -21,18 +22,7 @@ val_sequences = ["{VAL}"]
 voxel_size = [0.1, 0.1, 0.1]
 max_voxels = 4000
 prefetch = false
-[model]
-kind = "person_minkunet"
-width = 0.125
-[train]
-batch_size = 1
-[train.schedule]
-kind = "exp_decay"
-lr0 = 1e-3
-epoch0 = 1.0
-lr1 = 1e-4
-epoch1 = 3.0
-"#
+{training}"#
     );
     let p = dir.join(format!("{name}.toml"));
     std::fs::write(&p, text).unwrap();

@@ -14,6 +14,7 @@ use std::time::{Duration, Instant};
 use common::{metrics_without_times, ok, results_without_times};
 
 fn config(dir: &Path, data: &Path) -> PathBuf {
+    let training = common::tiny_model_and_training("epochs = 3\n");
     let text = format!(
         r#"seed = 0
 backend = "flex"
@@ -28,19 +29,7 @@ sequences = 4
 frames = 6
 seed = 1
 max_people = 8
-[model]
-kind = "person_minkunet"
-width = 0.125
-[train]
-batch_size = 1
-epochs = 3
-[train.schedule]
-kind = "exp_decay"
-lr0 = 1e-3
-epoch0 = 1.0
-lr1 = 1e-4
-epoch1 = 3.0
-[eval]
+{training}[eval]
 frame_stride = 3
 "#,
         data.display()

@@ -62,3 +62,22 @@ pub fn results_without_times(sweep_dir: &Path) -> Vec<String> {
     let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
     csv.lines().map(|l| l.split(',').zip(&header).filter(|(_, h)| !h.contains("seconds") && !h.contains("minutes")).map(|(c, _)| c.to_string()).collect::<Vec<_>>().join(",")).collect()
 }
+
+/// The reduced Person-MinkUNet the end-to-end tests train (width 0.125, batch 1, the quickstart's
+/// decay over 3 epochs): `[model]`, `[train]` with `train_keys` added, `[train.schedule]`.
+pub fn tiny_model_and_training(train_keys: &str) -> String {
+    format!(
+        r#"[model]
+kind = "person_minkunet"
+width = 0.125
+[train]
+batch_size = 1
+{train_keys}[train.schedule]
+kind = "exp_decay"
+lr0 = 1e-3
+epoch0 = 1.0
+lr1 = 1e-4
+epoch1 = 3.0
+"#
+    )
+}
