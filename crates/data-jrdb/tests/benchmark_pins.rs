@@ -1,4 +1,4 @@
-//! The simulated benchmarks cannot drift: every figure in the README and `weights/README.md` was
+//! The simulated benchmarks cannot drift: every figure in the README, `docs/accuracy.md` and `weights/README.md` was
 //! measured on them and the shipped weights trained on them, so a simulator change that alters
 //! their frames must come as a new preset (docs/simulated-benchmark.md). The first sequences of
 //! each preset at seed 0 (bench-v1: eight, its halls, plazas and corridors; bench-v2: seven, one
