@@ -16,9 +16,12 @@
 //! - [`profile`]: the kernels' own time and operation counters.
 //! - [`wgpu_device`]: the wgpu device on the platform's native graphics API (never OpenGL); an
 //!   error in a build without the `wgpu` feature (CPU only).
+//! - [`cuda_device`]: a CUDA GPU through Burn's CubeCL CUDA runtime, checked to run; an error in a
+//!   build without the `cuda` feature.
 
 #![warn(missing_docs)]
 
+pub mod cuda_device;
 pub mod geometry;
 pub mod kernels;
 pub mod modules;
@@ -42,5 +45,6 @@ pub use kernels::cpu::{cpu_features, cpu_kernel_path, cached_tile_gflops, fma_pe
 pub use options::{CpuKernels, KernelOptions};
 pub use tensor::{MapCache, SparseTensor};
 pub use wgpu_device::wgpu_device;
+pub use cuda_device::cuda_device;
 
 pub use burn;

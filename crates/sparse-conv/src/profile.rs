@@ -19,9 +19,16 @@ pub enum Kernel {
     ConvWeightGrad = 3,
     /// Batch norm (+ ReLU), forward and backward.
     BatchNorm = 4,
+    /// The GPU gather's tile plans ([`crate::geometry::row_tiles::RowTiles`]), made on the host.
+    TilePlan = 5,
+    /// Copying a map's tables and tile plans to a GPU.
+    Upload = 6,
+    /// The host's side of launching pmunet's GPU kernels, the op's and Adam's (they run
+    /// asynchronously: this is the time the host spends queuing them, not theirs).
+    GpuDispatch = 7,
 }
 
-static KERNEL_NANOS: [AtomicU64; 5] = [const { AtomicU64::new(0) }; 5];
+static KERNEL_NANOS: [AtomicU64; 8] = [const { AtomicU64::new(0) }; 8];
 
 /// Floating-point operations of the convolution kernels run so far (2 per multiply-add).
 static CONV_FLOPS: AtomicU64 = AtomicU64::new(0);
@@ -34,8 +41,9 @@ pub(crate) fn count_conv_flops(pairs: usize, c_in: usize, c_out: usize) {
 
 /// Runs `f`, adding its wall time to `kernel`'s process-wide total. The CPU backends wrap their
 /// kernels in it, so the benchmarks can print what the rest of a step (Burn's graph, its
-/// elementwise ops, the optimiser) costs beside them. GPU kernels are asynchronous and not
-/// counted.
+/// elementwise ops, the optimiser) costs beside them. On a GPU backend it counts the host's parts
+/// of the op (maps, tile plans, uploads, dispatch); the kernels themselves are asynchronous and
+/// not counted. Calls must not nest.
 pub fn in_kernel<R>(kernel: Kernel, f: impl FnOnce() -> R) -> R {
     let t = Instant::now();
     let r = f();
@@ -57,6 +65,12 @@ pub struct KernelTimes {
     pub conv_weight_grad_ms: f64,
     /// Batch norm, forward and backward.
     pub batch_norm_ms: f64,
+    /// GPU tile plans, on the host.
+    pub tile_plan_ms: f64,
+    /// Map tables and tile plans copied to a GPU.
+    pub upload_ms: f64,
+    /// The host's side of launching the op's GPU kernels.
+    pub gpu_dispatch_ms: f64,
     /// Operations of the three convolution kernels, in GFLOP (2 per multiply-add).
     pub conv_gflop: f64,
 }
@@ -71,6 +85,9 @@ impl KernelTimes {
             conv_input_grad_ms: ms(Kernel::ConvInputGrad),
             conv_weight_grad_ms: ms(Kernel::ConvWeightGrad),
             batch_norm_ms: ms(Kernel::BatchNorm),
+            tile_plan_ms: ms(Kernel::TilePlan),
+            upload_ms: ms(Kernel::Upload),
+            gpu_dispatch_ms: ms(Kernel::GpuDispatch),
             conv_gflop: CONV_FLOPS.load(Ordering::Relaxed) as f64 / 1e9,
         }
     }
@@ -84,6 +101,9 @@ impl KernelTimes {
             conv_input_grad_ms: d(self.conv_input_grad_ms, earlier.conv_input_grad_ms),
             conv_weight_grad_ms: d(self.conv_weight_grad_ms, earlier.conv_weight_grad_ms),
             batch_norm_ms: d(self.batch_norm_ms, earlier.batch_norm_ms),
+            tile_plan_ms: d(self.tile_plan_ms, earlier.tile_plan_ms),
+            upload_ms: d(self.upload_ms, earlier.upload_ms),
+            gpu_dispatch_ms: d(self.gpu_dispatch_ms, earlier.gpu_dispatch_ms),
             conv_gflop: d(self.conv_gflop, earlier.conv_gflop),
         }
     }
@@ -95,6 +115,11 @@ impl KernelTimes {
 
     /// All kinds together.
     pub fn total_ms(&self) -> f64 {
-        self.map_build_ms + self.conv_forward_ms + self.conv_input_grad_ms + self.conv_weight_grad_ms + self.batch_norm_ms
+        self.map_build_ms + self.conv_forward_ms + self.conv_input_grad_ms + self.conv_weight_grad_ms + self.batch_norm_ms + self.gpu_host_ms()
+    }
+
+    /// The op's host work that only a GPU backend has: tile plans, uploads, dispatch.
+    pub fn gpu_host_ms(&self) -> f64 {
+        self.tile_plan_ms + self.upload_ms + self.gpu_dispatch_ms
     }
 }

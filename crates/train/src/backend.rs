@@ -1,4 +1,4 @@
-//! The tensor backend, chosen at run time (`backend = "flex" | "ndarray" | "wgpu"`, `--backend`),
+//! The tensor backend, chosen at run time (`backend = "flex" | "ndarray" | "wgpu" | "cuda"`, `--backend`),
 //! and the CPU thread count.
 
 use anyhow::{Result, anyhow};
@@ -17,17 +17,21 @@ pub enum BackendKind {
     /// wgpu on the default adapter of the platform's native graphics API (Vulkan, Metal, DX12): a
     /// GPU, or Mesa's lavapipe on a CPU. Never OpenGL, where the op's kernels hang.
     Wgpu,
+    /// CUDA on the first NVIDIA GPU, through Burn's CubeCL CUDA runtime (the same kernels as
+    /// wgpu); in a build with the `cuda` feature.
+    Cuda,
 }
 
 impl BackendKind {
     /// The plain (non-autodiff) device; `.autodiff()` of it trains. wgpu without an adapter on a
-    /// native API is an error that says what to install.
+    /// native API, CUDA without a driver or without the build feature, are errors that say what to do.
     #[allow(deprecated)]
     pub fn device(self) -> Result<Device> {
         Ok(match self {
             BackendKind::Flex => Device::flex(),
             BackendKind::Ndarray => Device::ndarray(),
             BackendKind::Wgpu => sparse_conv::wgpu_device().map_err(|e| anyhow!("--backend wgpu: {e}"))?,
+            BackendKind::Cuda => sparse_conv::cuda_device(0).map_err(|e| anyhow!("--backend cuda: {e}"))?,
         })
     }
 
@@ -37,6 +41,7 @@ impl BackendKind {
             BackendKind::Flex => "flex",
             BackendKind::Ndarray => "ndarray",
             BackendKind::Wgpu => "wgpu",
+            BackendKind::Cuda => "cuda",
         }
     }
 
@@ -61,5 +66,28 @@ pub fn init_threads(threads: Option<usize>) -> Result<()> {
         Ok(()) => Ok(()),
         Err(_) if rayon::current_num_threads() == n => Ok(()),
         Err(e) => Err(anyhow!("cannot use {n} threads: the thread pool already has {} ({e})", rayon::current_num_threads())),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `--backend cuda` is an error that says what is missing where it cannot run (a build
+    /// without the feature, a machine without a driver), never a panic; where it runs, it runs.
+    #[test]
+    fn cuda_is_a_device_or_an_error_saying_what_is_missing() {
+        match BackendKind::Cuda.device() {
+            Ok(device) => {
+                assert!(cfg!(feature = "cuda"), "a build without the cuda feature made a CUDA device");
+                let x = burn::tensor::Tensor::<1>::ones([3], &device).sum().into_scalar::<f32>();
+                assert_eq!(x, 3.0);
+            }
+            Err(e) => {
+                let e = e.to_string();
+                let expected = if cfg!(feature = "cuda") { "no usable CUDA device" } else { "build with `--features cuda`" };
+                assert!(e.starts_with("--backend cuda: ") && e.contains(expected), "{e}");
+            }
+        }
     }
 }

@@ -281,7 +281,7 @@ mod tests {
     fn missing_model_kind_and_bad_values_are_errors() {
         assert!(RunConfig::from_toml_str("seed = 1\n").unwrap_err().to_string().contains("model"));
         assert!(RunConfig::from_toml_str(&format!("{MIN}[train]\nbatch_size = 0\n")).is_err());
-        assert!(RunConfig::from_toml_str(&format!("backend = \"cuda\"\n{MIN}")).unwrap_err().to_string().contains("cuda"));
+        assert!(RunConfig::from_toml_str(&format!("backend = \"tpu\"\n{MIN}")).unwrap_err().to_string().contains("tpu"));
         assert!(RunConfig::from_toml_str(&format!("{MIN}[train.schedule]\nkind = \"exp_decay\"\nlr0 = -1.0\n")).is_err());
     }
 

@@ -9,15 +9,8 @@ use anyhow::Context;
 use clap::{Parser, ValueEnum};
 use bench::model::{KernelTimes, Parts, bench_batch, run};
 use model::{CenterPointConfig, ModelConfig, PersonMinkUNetConfig};
-use sparse_conv::burn::tensor::Device;
+use bench::backend::Backend;
 use bench::scene;
-
-#[derive(Clone, Copy, Debug, ValueEnum)]
-enum Backend {
-    Flex,
-    Ndarray,
-    Wgpu,
-}
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 #[value(rename_all = "snake_case")]
@@ -82,12 +75,7 @@ fn main() -> anyhow::Result<()> {
         Kind::PersonMinkunet => ModelConfig::PersonMinkunet(PersonMinkUNetConfig { width: args.width, ..Default::default() }),
         Kind::Centerpoint => ModelConfig::Centerpoint(CenterPointConfig { width: args.width, ..Default::default() }),
     };
-    let (device, name) = match args.backend {
-        Backend::Flex => (Device::flex(), "flex"),
-        #[allow(deprecated)]
-        Backend::Ndarray => (Device::ndarray(), "ndarray"),
-        Backend::Wgpu => (sparse_conv::wgpu_device().map_err(anyhow::Error::msg)?, "wgpu"),
-    };
+    let (device, name) = (args.backend.device()?, args.backend.name());
     let parts = match args.only {
         None => Parts::Both,
         Some(Only::Infer) => Parts::Inference,
@@ -133,7 +121,12 @@ fn print_kernels(k: Option<KernelTimes>, mean_wall_ms: Option<f64>) {
         k.batch_norm_ms,
         wall_ms - k.total_ms()
     );
-    if k.conv_gflop > 0.0 {
+    if k.gpu_host_ms() > 0.0 {
+        println!(
+            "    the op's host work on the GPU path: tile plans {:.1} ms, uploads {:.1} ms, dispatch {:.1} ms (in the {:.1} ms above)",
+            k.tile_plan_ms, k.upload_ms, k.gpu_dispatch_ms, k.total_ms()
+        );
+    } else if k.conv_gflop > 0.0 {
         println!("    conv kernels: {:.1} GFLOP at {:.1} GFLOP/s", k.conv_gflop, k.conv_gflops());
     }
 }

@@ -6,22 +6,15 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 use anyhow::Context;
-use clap::{Parser, ValueEnum};
+use clap::Parser;
 use serde::Serialize;
 use sparse_conv::burn::tensor::{Device, Distribution, Tensor};
 use bench::timing::{Timing, median_ms, peak_rss_mb, time_ms};
 use sparse_conv::profile;
 use sparse_conv::kernels::cpu::{self, PairDirection};
+use bench::backend::Backend;
 use bench::scene;
 use sparse_conv::{CoordIndex, KernelMap, backward_from, sparse_conv};
-
-#[derive(Clone, Copy, Debug, ValueEnum, Serialize)]
-#[serde(rename_all = "lowercase")]
-enum Backend {
-    Flex,
-    Ndarray,
-    Wgpu,
-}
 
 #[derive(Parser, Debug)]
 #[command(about = "Benchmark of pmunet's sparse convolution on a voxel scene (medians, with minima)")]
@@ -207,12 +200,7 @@ fn measure(args: &Args, scene_coords: &[sparse_conv::Coord]) -> anyhow::Result<R
     let threads = rayon::current_num_threads();
     let coords = scene::tile_as_batch(scene_coords, args.scale[0]);
     sparse_conv::geometry::coords::validate(&coords).context("scene coordinates")?;
-    let device = match args.backend {
-        Backend::Flex => Device::flex(),
-        #[allow(deprecated)]
-        Backend::Ndarray => Device::ndarray(),
-        Backend::Wgpu => sparse_conv::wgpu_device().map_err(anyhow::Error::msg)?,
-    };
+    let device = args.backend.device()?;
 
     let map_ms = median_ms(args.warmup, args.runs, || {
         let index = CoordIndex::build(&coords).expect("validated");
@@ -225,7 +213,7 @@ fn measure(args: &Args, scene_coords: &[sparse_conv::Coord]) -> anyhow::Result<R
     let pairs = map.num_pairs();
     let n = coords.len();
 
-    let cpu = matches!(args.backend, Backend::Flex | Backend::Ndarray);
+    let cpu = args.backend.is_cpu();
     let sgemm = cpu.then(|| gemm_ceiling(2048, args.warmup, args.runs.min(5)));
     let fma_peak_gflops = if cpu { sparse_conv::fma_peak_gflops() } else { None };
     let queue = if cpu { 1 } else { args.queue.max(1) };

@@ -3,5 +3,5 @@
 
 pub mod coords;
 pub mod kernel_map;
-#[cfg(feature = "wgpu")]
+#[cfg(feature = "cube")]
 pub(crate) mod row_tiles;

@@ -434,7 +434,7 @@ struct GatherTables {
 
 impl GatherTables {
     fn upload(client: &Client, table: &NeighborTable) -> Self {
-        Self { table: upload_u32(client, table.as_slice()), tiles: OnceLock::new() }
+        Self { table: in_kernel(Kernel::Upload, || upload_u32(client, table.as_slice())), tiles: OnceLock::new() }
     }
 }
 
@@ -471,15 +471,14 @@ fn upload_u32(client: &Client, values: &[u32]) -> Handle {
 }
 
 fn upload_tiles(client: &Client, table: &NeighborTable, n_src: usize) -> TilePlan {
-    // Host work of the map's preparation, counted with the map build.
-    let tiles = in_kernel(Kernel::MapBuild, || RowTiles::new(table, n_src, TILE_ROWS));
-    TilePlan {
+    let tiles = in_kernel(Kernel::TilePlan, || RowTiles::new(table, n_src, TILE_ROWS));
+    in_kernel(Kernel::Upload, || TilePlan {
         order: upload_u32(client, &tiles.order),
         start: upload_u32(client, &tiles.start),
         offsets: upload_u32(client, &tiles.offsets),
         tiles: tiles.tiles(),
         offsets_len: tiles.offsets.len().max(1),
-    }
+    })
 }
 
 fn empty_f32(like: &CubeTensor, shape: Shape) -> CubeTensor {
@@ -532,7 +531,7 @@ fn gather_conv(src: CubeTensor, weight: CubeTensor, gather: &GatherTables, table
         let count = calculate_cube_count_elemwise(&client, rows.div_ceil(DIRECT_UNIT_ROWS) * c_out / vector, dim);
         // Safety: rows and channels are bounded by the guard on the unit's position, partners by
         // `partner < n_src`, weights by the shapes checked by the callers.
-        unsafe {
+        in_kernel(Kernel::GpuDispatch, || unsafe {
             direct_gather_kernel::launch_unchecked::<f32>(
                 &client,
                 count,
@@ -549,7 +548,7 @@ fn gather_conv(src: CubeTensor, weight: CubeTensor, gather: &GatherTables, table
                 volume,
                 DIRECT_UNIT_ROWS,
             );
-        }
+        });
         return out;
     }
     let plan = gather.tiles.get_or_init(|| upload_tiles(&client, table, n_src));
@@ -559,7 +558,7 @@ fn gather_conv(src: CubeTensor, weight: CubeTensor, gather: &GatherTables, table
     // Safety: every index the kernel forms is in bounds: rows by `t < rows`, channels by the
     // column and reduced-vector guards, partners by `partner < n_src`, the tile plan by its
     // construction from this table.
-    unsafe {
+    in_kernel(Kernel::GpuDispatch, || unsafe {
         gather_conv_kernel::launch_unchecked::<f32>(
             &client,
             count,
@@ -582,7 +581,7 @@ fn gather_conv(src: CubeTensor, weight: CubeTensor, gather: &GatherTables, table
             tile_vectors,
             step_vectors,
         );
-    }
+    });
     out
 }
 
@@ -610,16 +609,17 @@ fn sum_slices(partial: &CubeTensor, out: &CubeTensor, slices: usize, vector: usi
     let dim = CubeDim::new_1d(256);
     let count = CubeCount::Static(len.div_ceil(256) as u32, 1, 1);
     // Safety: the kernel reads `slices · len` and writes `len` vectors, the buffers' sizes.
-    unsafe {
+    in_kernel(Kernel::GpuDispatch, || unsafe {
         sum_slices_kernel::launch_unchecked::<f32>(&partial.client, count, dim, vector, vectors(partial, vector), vectors(out, vector), len, slices);
-    }
+    });
 }
 
 /// Weight gradient on a cube device (f32), `[K, C_in, C_out]`.
 pub(crate) fn weight_grad(features: CubeTensor, grad_out: CubeTensor, map: &KernelMap) -> CubeTensor {
     let (features, grad_out) = (contiguous(features), contiguous(grad_out));
     let (c_in, c_out, volume) = (features.meta.shape()[1], grad_out.meta.shape()[1], map.volume());
-    let num_pairs = map.pairs().input.len();
+    // The pairs grouped by offset are made from the table on first use: map work.
+    let num_pairs = in_kernel(Kernel::MapBuild, || map.pairs().input.len());
     if num_pairs * c_in * c_out == 0 {
         return zeros(&features, Shape::new([volume, c_in, c_out]));
     }
@@ -628,7 +628,7 @@ pub(crate) fn weight_grad(features: CubeTensor, grad_out: CubeTensor, map: &Kern
     let [start, input, output] = device_tables.pairs.get_or_init(|| {
         let pairs = map.pairs();
         let start: Vec<u32> = pairs.start.iter().map(|&s| s as u32).collect();
-        [upload_u32(&client, &start), upload_u32(&client, &pairs.input), upload_u32(&client, &pairs.output)]
+        in_kernel(Kernel::Upload, || [upload_u32(&client, &start), upload_u32(&client, &pairs.input), upload_u32(&client, &pairs.output)])
     });
     let vector = widest_block(&[c_in, c_out]);
     let (in_vectors, out_vectors) = (tile_vectors(c_in / vector), tile_vectors(c_out / vector));
@@ -642,7 +642,7 @@ pub(crate) fn weight_grad(features: CubeTensor, grad_out: CubeTensor, map: &Kern
     let dim = CubeDim::new_1d((in_vectors * out_vectors) as u32);
     // Safety: pair rows are rows of `features` and `grad_out`; channels are guarded; every
     // element of `partial` is written by the cube of its slice, offset and tile.
-    unsafe {
+    in_kernel(Kernel::GpuDispatch, || unsafe {
         weight_grad_kernel::launch_unchecked::<f32>(
             &client,
             count,
@@ -662,7 +662,7 @@ pub(crate) fn weight_grad(features: CubeTensor, grad_out: CubeTensor, map: &Kern
             out_vectors,
             STEP_PAIRS,
         );
-    }
+    });
     let shape = Shape::new([volume, c_in, c_out]);
     if slices == 1 {
         return CubeBackend::float_reshape(partial, shape);
@@ -693,7 +693,7 @@ pub(crate) fn adam_step(param: CubeTensor, grad: CubeTensor, moment_1: CubeTenso
     let buffer = |t: &CubeTensor| vectors(t, 1);
     // Safety: the kernel reads `len` elements of each input and writes `3 · len` (AMSGrad:
     // `4 · len`) of `out`, the buffers' sizes.
-    unsafe {
+    in_kernel(Kernel::GpuDispatch, || unsafe {
         adam_kernel::launch_unchecked(
             &param.client,
             count,
@@ -716,6 +716,6 @@ pub(crate) fn adam_step(param: CubeTensor, grad: CubeTensor, moment_1: CubeTenso
             s.weight_decay != 0.0,
             amsgrad,
         );
-    }
+    });
     out
 }

@@ -4,5 +4,5 @@
 //! Nothing here knows Burn's tensors; `crate::ops::conv` and the other ops call these.
 
 pub mod cpu;
-#[cfg(feature = "wgpu")]
+#[cfg(feature = "cube")]
 pub(crate) mod cube;

@@ -20,7 +20,7 @@ use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
 use burn::backend::tensor::FloatTensor;
 use burn::backend::{Autodiff, Backend, Dispatch, Scalar, TensorMetadata, backend_extension};
 use burn::tensor::{Shape, Slice, Tensor};
-#[cfg(feature = "wgpu")]
+#[cfg(feature = "cube")]
 use burn_cubecl::CubeBackend;
 
 use crate::ops::host::{Host, HostFloats, on_host};
@@ -31,7 +31,7 @@ use crate::profile::{Kernel, in_kernel};
 ///
 /// `batch_stats` says the statistics are the features' own (training): the backward then
 /// differentiates through them. `relu` applies `max(·, 0)` to the normalised features.
-#[backend_extension(NdArray, Flex, Cube: cfg(feature = "wgpu"), Fusion: cfg(feature = "wgpu"), Autodiff)]
+#[backend_extension(NdArray, Flex, Cube: cfg(feature = "cube"), Fusion: cfg(feature = "cube"), Autodiff)]
 pub trait BatchNormBackend: Backend {
     /// Mean and biased variance per channel, `[2, C]`. A constant: not differentiated.
     #[fusion(dtype = x, shape = Shape::new([2, x[1]]))]
@@ -322,7 +322,7 @@ impl<B: HostFloats> BatchNormBackend for B {
 }
 
 /// The composition (the trait's default bodies).
-#[cfg(feature = "wgpu")]
+#[cfg(feature = "cube")]
 impl BatchNormBackend for CubeBackend {}
 
 #[derive(Debug)]

@@ -15,13 +15,13 @@ use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
 use burn::backend::tensor::FloatTensor;
 use burn::backend::{Autodiff, Backend, Dispatch, TensorMetadata, backend_extension};
 use burn::tensor::{Slice, Tensor};
-#[cfg(feature = "wgpu")]
+#[cfg(feature = "cube")]
 use burn_cubecl::CubeBackend;
 use crate::ops::host::{Host, HostFloats, on_host};
 use crate::kernels::cpu::{Element, filled_in_chunks};
 
 /// A backend that concatenates and splits `[rows, C]` features along the channels.
-#[backend_extension(NdArray, Flex, Cube: cfg(feature = "wgpu"), Fusion: cfg(feature = "wgpu"), Autodiff)]
+#[backend_extension(NdArray, Flex, Cube: cfg(feature = "cube"), Fusion: cfg(feature = "cube"), Autodiff)]
 pub trait ChannelConcatBackend: Backend {
     /// `[a | b]` row by row: `[rows, C_a + C_b]`.
     #[fusion(dtype = a, shape = burn::tensor::Shape::new([a[0], a[1] + b[1]]))]
@@ -89,7 +89,7 @@ impl<B: HostFloats> ChannelConcatBackend for B {
 }
 
 /// Burn's `cat` and `slice` (the trait's default bodies).
-#[cfg(feature = "wgpu")]
+#[cfg(feature = "cube")]
 impl ChannelConcatBackend for CubeBackend {}
 
 #[derive(Debug)]

@@ -14,13 +14,13 @@ use burn::backend::autodiff::grads::Gradients;
 use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
 use burn::backend::tensor::{FloatTensor, IndexingUpdateOp, IntTensor};
 use burn::backend::{Autodiff, Backend, Dispatch, TensorMetadata, backend_extension};
-#[cfg(feature = "wgpu")]
+#[cfg(feature = "cube")]
 use burn_cubecl::CubeBackend;
 use burn::tensor::{Shape, Tensor, TensorData};
 
 use crate::kernels::cpu::{self, PairDirection};
 use crate::kernels::cpu::norm as cpu_norm;
-#[cfg(feature = "wgpu")]
+#[cfg(feature = "cube")]
 use crate::kernels::cube;
 use crate::geometry::kernel_map::KernelMap;
 use crate::ops::host::{Host, HostFloats, on_host};
@@ -33,7 +33,7 @@ use crate::profile::{Kernel, count_conv_flops, in_kernel};
 /// The default bodies compose Burn primitives ([`composed`]); every backend pmunet runs on
 /// overrides them with its own kernels. `Fusion` (wgpu's default) records the calls lazily and
 /// runs the inner backend's kernels.
-#[backend_extension(NdArray, Flex, Cube: cfg(feature = "wgpu"), Fusion: cfg(feature = "wgpu"), Autodiff)]
+#[backend_extension(NdArray, Flex, Cube: cfg(feature = "cube"), Fusion: cfg(feature = "cube"), Autodiff)]
 pub trait SparseConvBackend: Backend {
     /// `out[o] = Σ_k Σ_{(i, o) ∈ M_k} x[i] · W_k`.
     #[fusion(dtype = features, shape = Shape::new([map.n_out(), weight[2]]))]
@@ -203,7 +203,7 @@ impl<B: HostFloats> SparseConvBackend for B {
 }
 
 /// CubeCL kernels for f32 ([`crate::kernels::cube`]), the composition for other dtypes.
-#[cfg(feature = "wgpu")]
+#[cfg(feature = "cube")]
 impl SparseConvBackend for CubeBackend {
     fn sparse_conv(features: FloatTensor<Self>, weight: FloatTensor<Self>, map: Arc<KernelMap>) -> FloatTensor<Self> {
         check_shapes(&features.shape(), &weight.shape(), map.n_in(), map.volume());

@@ -13,7 +13,7 @@ use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
 use burn::backend::tensor::FloatTensor;
 use burn::backend::{Autodiff, Dispatch, backend_extension};
 use burn::tensor::Tensor;
-#[cfg(feature = "wgpu")]
+#[cfg(feature = "cube")]
 use burn_cubecl::CubeBackend;
 
 use crate::ops::host::HostFloats;
@@ -25,7 +25,7 @@ use crate::ops::conv::check_conv_inputs;
 /// A backend that runs a sparse convolution and the batch norm after it (fixed statistics) as
 /// one op. Shapes as [`SparseConvBackend::sparse_conv`]'s; `stats` is `[2, C_out]` (mean, biased
 /// variance), `gamma` and `beta` `[C_out]`.
-#[backend_extension(NdArray, Flex, Cube: cfg(feature = "wgpu"), Fusion: cfg(feature = "wgpu"), Autodiff)]
+#[backend_extension(NdArray, Flex, Cube: cfg(feature = "cube"), Fusion: cfg(feature = "cube"), Autodiff)]
 pub trait ConvNormBackend: SparseConvBackend + BatchNormBackend {
     /// `relu?((conv(x) − mean)·γ/√(var + ε) + β)`.
     #[allow(clippy::too_many_arguments)]
@@ -91,7 +91,7 @@ impl<B: HostFloats> ConvNormBackend for B {
 }
 
 /// The conv's kernels, then the norm's (the trait's default bodies).
-#[cfg(feature = "wgpu")]
+#[cfg(feature = "cube")]
 impl ConvNormBackend for CubeBackend {}
 
 /// The default bodies: the conv op and the norm op, each with its own backward.

@@ -14,11 +14,11 @@ use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
 use burn::backend::tensor::FloatTensor;
 use burn::backend::{Autodiff, Backend, Dispatch, Flex, NdArray, TensorMetadata, backend_extension};
 use burn::tensor::{Shape, Tensor};
-#[cfg(feature = "wgpu")]
+#[cfg(feature = "cube")]
 use burn_cubecl::CubeBackend;
 
 /// A backend that can root a backward pass at a tensor with a given gradient.
-#[backend_extension(NdArray, Flex, Cube: cfg(feature = "wgpu"), Fusion: cfg(feature = "wgpu"), Autodiff)]
+#[backend_extension(NdArray, Flex, Cube: cfg(feature = "cube"), Fusion: cfg(feature = "cube"), Autodiff)]
 pub trait OutputGradBackend: Backend {
     /// A one-element tensor whose backward hands `grad` to `output`. Without autodiff there is
     /// nothing to hand on: a zero.
@@ -31,7 +31,7 @@ pub trait OutputGradBackend: Backend {
 
 impl OutputGradBackend for NdArray {}
 impl OutputGradBackend for Flex {}
-#[cfg(feature = "wgpu")]
+#[cfg(feature = "cube")]
 impl OutputGradBackend for CubeBackend {}
 
 #[derive(Debug)]

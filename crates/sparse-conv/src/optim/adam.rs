@@ -24,14 +24,14 @@ use burn::grad_clipping::GradientClippingConfig;
 use burn::optim::decay::WeightDecayConfig;
 use burn::optim::{Adam, AdamState, AdaptiveMomentumState, LearningRate, ModuleOptimizer, Optimizer};
 use burn::tensor::{Device, Shape, Slice, Tensor};
-#[cfg(feature = "wgpu")]
+#[cfg(feature = "cube")]
 use burn_cubecl::CubeBackend;
 
 use crate::ops::host::{Host, HostFloats, on_host};
 use crate::kernels::cpu::adam::{AdamScalars, adam_update};
 
 /// A backend that runs one Adam step of a flat parameter.
-#[backend_extension(NdArray, Flex, Cube: cfg(feature = "wgpu"), Fusion: cfg(feature = "wgpu"), Autodiff)]
+#[backend_extension(NdArray, Flex, Cube: cfg(feature = "cube"), Fusion: cfg(feature = "cube"), Autodiff)]
 pub trait AdamBackend: Backend {
     /// `[θ'; m₁'; m₂']` as `[3, n]`, from the flat `[n]` parameter `θ`, its gradient and moments
     /// (zeros before the first step); with `amsgrad` `[θ'; m₁'; m₂'; max(m̂₂, m₂')]` as `[4, n]`
@@ -123,7 +123,7 @@ impl<B: HostFloats> AdamBackend for B {
 }
 
 /// The f32 kernel of [`crate::kernels::cube`], Burn's primitives for other dtypes.
-#[cfg(feature = "wgpu")]
+#[cfg(feature = "cube")]
 impl AdamBackend for CubeBackend {
     fn adam_step(
         param: FloatTensor<Self>,

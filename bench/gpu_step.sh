@@ -1,0 +1,47 @@
+#!/usr/bin/env bash
+# Where a full-width Person-MinkUNet's step goes on a GPU, for wgpu and CUDA in one run (issue 48's
+# yardstick): the batch-2 training step and one-frame inference on the standard scene with the
+# host's parts of the op (kernel maps, tile plans, uploads, dispatch), the batch-16 step's frames
+# per second against batch 2's, then one profiled batch-2 step whose kernels CubeCL times one by
+# one (each synchronised, so that run is slower; it gives the device time by kernel family, and
+# against the unprofiled step how busy the GPU is).
+#
+#   bash bench/gpu_step.sh [BACKENDS]      (default: "wgpu cuda"; MODEL_BENCH=path/to/model-bench)
+#
+# Build the binary where Cargo is (nothing large is built here):
+#   cargo build -p bench --bin model-bench --features cuda
+# and carry target/debug/model-bench and bench/scene_jrdb_like.npy to the GPU machine. A backend
+# the machine cannot run prints its error and the script goes on.
+set -uo pipefail
+root=$(cd "$(dirname "$0")/.." && pwd)
+backends=${1:-wgpu cuda}
+bench=${MODEL_BENCH:-$root/target/debug/model-bench}
+scene=$root/bench/scene_jrdb_like.npy
+[ -x "$bench" ] || { echo "no model-bench at $bench (MODEL_BENCH=…, or build it as above)" >&2; exit 2; }
+command -v nvidia-smi >/dev/null && nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader
+dir=$(mktemp -d)
+trap 'rm -rf "$dir"' EXIT
+for backend in $backends; do
+    echo "== $backend"
+    "$bench" --backend "$backend" --coords "$scene" --batch 1 --only infer --runs 10 --warmup 3 || continue
+    "$bench" --backend "$backend" --coords "$scene" --batch 2 --only train --runs 10 --warmup 3 | tee "$dir/b2.txt"
+    "$bench" --backend "$backend" --coords "$scene" --batch 16 --only train --runs 5 --warmup 2 | tee "$dir/b16.txt"
+    b2=$(grep -o 'training step *[0-9.]*' "$dir/b2.txt" | awk '{print $3}')
+    b16=$(grep -o 'training step *[0-9.]*' "$dir/b16.txt" | awk '{print $3}')
+    awk -v a="$b2" -v b="$b16" 'BEGIN { if (a > 0 && b > 0) printf "  frames/s: batch 2 %.1f, batch 16 %.1f (%.2fx)\n", 2000 / a, 16000 / b, (16000 / b) / (2000 / a) }'
+    # CubeCL reads cubecl.toml from the working directory.
+    printf '[profiling]\nlogger = { level = "basic", file = "%s/prof-%s.log", append = false }\n' "$dir" "$backend" > "$dir/cubecl.toml"
+    runs=3
+    (cd "$dir" && "$bench" --backend "$backend" --coords "$scene" --batch 2 --only train --runs $runs --warmup 0 > /dev/null)
+    grep "^| [0-9]" "$dir/prof-$backend.log" | awk -F'|' -v runs=$runs -v step="$b2" '
+        { name = $3; gsub(/^ +| +$/, "", name); d = $2; gsub(/ /, "", d); v = d + 0
+          if (d ~ /µs/) v /= 1000; else if (d ~ /ns/) v /= 1e6; else if (d !~ /ms/ && d ~ /s$/) v *= 1000
+          family = (name ~ /GatherConv|DirectGather/) ? "op: gather (fwd, feature grad)" \
+                 : (name ~ /WeightGrad|SumSlices/) ? "op: weight grad" \
+                 : (name ~ /Adam/) ? "Adam" \
+                 : (name ~ /[Mm]atmul/) ? "Burn: matmul" : "Burn: the rest (elementwise, reductions, fused)"
+          total[family] += v; all += v }
+        END { printf "  device time per step by kernel family (%d profiled steps incl. the first, each kernel synchronised):\n", runs
+              for (f in total) printf "    %-48s %8.2f ms\n", f, total[f] / runs
+              printf "    %-48s %8.2f ms = %.0f %% of the unprofiled step (%.1f ms)\n", "all kernels", all / runs, 100 * all / runs / step, step }'
+done
