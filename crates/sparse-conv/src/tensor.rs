@@ -100,10 +100,15 @@ impl SparseTensor {
         if let Some(map) = self.cache.get(key) {
             return map;
         }
-        let map = in_kernel(Kernel::MapBuild, || {
-            let index = self.cache.index(self.stride, &self.coords);
-            Arc::new(KernelMap::submanifold(&self.coords, &index, kernel, self.stride))
-        });
+        let map = if on_gpu(&self.features) {
+            // The GPU kernels build its tables on the device (`geometry::device_maps`).
+            Arc::new(KernelMap::submanifold_deferred(self.coords.clone(), kernel, self.stride))
+        } else {
+            in_kernel(Kernel::MapBuild, || {
+                let index = self.cache.index(self.stride, &self.coords);
+                Arc::new(KernelMap::submanifold(&self.coords, &index, kernel, self.stride))
+            })
+        };
         self.cache.insert(key, map.clone());
         map
     }
@@ -160,6 +165,17 @@ impl SparseTensor {
     /// A tensor on another level of the same cache.
     pub(crate) fn on_level(&self, features: Tensor<2>, coords: Arc<[Coord]>, stride: i32) -> Self {
         Self { features, coords, stride, cache: self.cache.clone() }
+    }
+}
+
+/// Whether the features live on a GPU (a CubeCL device), whose submanifold maps are built there.
+fn on_gpu(features: &Tensor<2>) -> bool {
+    #[cfg(feature = "cube")]
+    return crate::kernels::cube::is_cube_device(&features.device());
+    #[cfg(not(feature = "cube"))]
+    {
+        let _ = features;
+        false
     }
 }
 

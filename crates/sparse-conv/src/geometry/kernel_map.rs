@@ -87,7 +87,11 @@ pub struct KernelMap {
     kind: MapKind,
     n_in: usize,
     n_out: usize,
-    out_table: Arc<NeighborTable>,
+    volume: usize,
+    /// Built with the map, except for a [`KernelMap::submanifold_deferred`] map: on first host use.
+    out_table: OnceLock<Arc<NeighborTable>>,
+    /// The coordinates and tensor stride a deferred submanifold map is built from.
+    source: Option<(Arc<[Coord]>, i32)>,
     /// Built with the map for down maps; for submanifold maps it is the mirror of `out_table`,
     /// made only if something asks (the kernels run on `pairs`).
     in_table: OnceLock<Arc<NeighborTable>>,
@@ -100,11 +104,13 @@ pub struct KernelMap {
 
 impl fmt::Debug for KernelMap {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        // A deferred map's tables are not built for a debug print.
+        let pairs = self.out_table.get().map(|t| t.data.iter().filter(|&&i| i != NONE).count());
         f.debug_struct("KernelMap")
             .field("kind", &self.kind)
             .field("n_in", &self.n_in)
             .field("n_out", &self.n_out)
-            .field("pairs", &self.num_pairs())
+            .field("pairs", &pairs)
             .finish()
     }
 }
@@ -127,12 +133,33 @@ impl KernelMap {
 
     /// Number of kernel offsets (the weight's first dimension).
     pub fn volume(&self) -> usize {
-        self.out_table.volume
+        self.volume
     }
 
     /// For each output row, its input row at each offset.
     pub fn out_table(&self) -> &NeighborTable {
-        &self.out_table
+        self.out_table_arc()
+    }
+
+    fn out_table_arc(&self) -> &Arc<NeighborTable> {
+        self.out_table.get_or_init(|| {
+            let (coords, stride) = self.source.as_ref().expect("a map without a source has its table");
+            let MapKind::Submanifold { kernel } = self.kind else { unreachable!("only submanifold maps are deferred") };
+            let index = CoordIndex::build(coords).expect("a sparse tensor's coordinates are valid");
+            KernelMap::submanifold(coords, &index, kernel, *stride).out_table_arc().clone()
+        })
+    }
+
+    /// The coordinates and tensor stride of a [`KernelMap::submanifold_deferred`] map, from which a
+    /// GPU backend builds its own tables.
+    pub fn deferred_source(&self) -> Option<(&Arc<[Coord]>, i32)> {
+        self.source.as_ref().map(|(coords, stride)| (coords, *stride))
+    }
+
+    /// Whether the host tables exist (always, except for a deferred map nothing on the host has
+    /// read yet).
+    pub fn has_host_tables(&self) -> bool {
+        self.out_table.get().is_some()
     }
 
     /// For each input row, its output row at each offset.
@@ -141,7 +168,7 @@ impl KernelMap {
     }
 
     fn in_table_arc(&self) -> &Arc<NeighborTable> {
-        self.in_table.get_or_init(|| Arc::new(mirror(&self.out_table)))
+        self.in_table.get_or_init(|| Arc::new(mirror(self.out_table_arc())))
     }
 
     /// The offset whose pairs are `(r, r)` for every row (the submanifold centre), if any.
@@ -151,13 +178,13 @@ impl KernelMap {
 
     /// Number of (input, output) pairs over all offsets.
     pub fn num_pairs(&self) -> usize {
-        self.out_table.data.iter().filter(|&&i| i != NONE).count()
+        self.out_table_arc().data.iter().filter(|&&i| i != NONE).count()
     }
 
     /// The pairs grouped by offset, ordered by output row within an offset (the forward's
     /// destination order); built on first use.
     pub fn pairs(&self) -> &OffsetPairs {
-        self.pairs.get_or_init(|| grouped_by_offset(&self.out_table))
+        self.pairs.get_or_init(|| grouped_by_offset(self.out_table_arc()))
     }
 
     /// The same pairs ordered by input row within an offset (the feature gradient's destination
@@ -211,8 +238,10 @@ impl KernelMap {
             kind,
             n_in: self.n_out,
             n_out: self.n_in,
-            out_table: self.in_table_arc().clone(),
-            in_table: OnceLock::from(self.out_table.clone()),
+            volume: self.volume,
+            out_table: OnceLock::from(self.in_table_arc().clone()),
+            source: None,
+            in_table: OnceLock::from(self.out_table_arc().clone()),
             pairs: OnceLock::new(),
             pairs_by_input: OnceLock::new(),
             attachments: Mutex::default(),
@@ -273,7 +302,30 @@ impl KernelMap {
             kind: MapKind::Submanifold { kernel },
             n_in: n,
             n_out: n,
-            out_table: Arc::new(table),
+            volume,
+            out_table: OnceLock::from(Arc::new(table)),
+            source: None,
+            in_table: OnceLock::new(),
+            pairs: OnceLock::new(),
+            pairs_by_input: OnceLock::new(),
+            attachments: Mutex::default(),
+        }
+    }
+
+    /// The submanifold map of [`KernelMap::submanifold`] without its tables: a GPU backend builds
+    /// them on the device from `coords` (`crate::geometry::device_maps`), the host only where
+    /// something on the host reads them. What a GPU's forward pass makes of each level, so that
+    /// the host never hashes or probes the level's voxels.
+    pub fn submanifold_deferred(coords: Arc<[Coord]>, kernel: usize, stride: i32) -> KernelMap {
+        assert!(kernel % 2 == 1, "submanifold kernel size must be odd, got {kernel}");
+        let n = coords.len();
+        KernelMap {
+            kind: MapKind::Submanifold { kernel },
+            n_in: n,
+            n_out: n,
+            volume: kernel.pow(3),
+            out_table: OnceLock::new(),
+            source: Some((coords, stride)),
             in_table: OnceLock::new(),
             pairs: OnceLock::new(),
             pairs_by_input: OnceLock::new(),
@@ -323,7 +375,9 @@ impl KernelMap {
             kind: MapKind::Down { kernel },
             n_in: coords.len(),
             n_out: out_coords.len(),
-            out_table: Arc::new(out_table),
+            volume,
+            out_table: OnceLock::from(Arc::new(out_table)),
+            source: None,
             in_table: OnceLock::from(Arc::new(in_table)),
             pairs: OnceLock::new(),
             pairs_by_input: OnceLock::new(),
@@ -334,7 +388,7 @@ impl KernelMap {
 }
 
 /// Kernel offsets `(dx, dy, dz)·stride`, each of dx, dy, dz in `lo..lo + kernel`, x-major.
-fn offsets(kernel: usize, lo: i32, stride: i32) -> Vec<[i32; 3]> {
+pub(crate) fn offsets(kernel: usize, lo: i32, stride: i32) -> Vec<[i32; 3]> {
     let r = lo..lo + kernel as i32;
     let mut out = Vec::with_capacity(kernel.pow(3));
     for dx in r.clone() {
@@ -426,6 +480,22 @@ fn grouped_by_offset(table: &NeighborTable) -> OffsetPairs {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_deferred_map_builds_the_same_tables_on_first_host_use() {
+        let coords: Vec<Coord> = vec![[0, 0, 0, 0], [0, 2, 0, 0], [0, 2, 2, 2], [1, 0, 0, 2], [0, -2, -2, -2], [0, 10, 10, 10]];
+        let eager = KernelMap::submanifold(&coords, &CoordIndex::build(&coords).unwrap(), 3, 2);
+        let deferred = KernelMap::submanifold_deferred(coords.clone().into(), 3, 2);
+        assert_eq!((deferred.n_in(), deferred.n_out(), deferred.volume()), (6, 6, 27));
+        assert!(!deferred.has_host_tables());
+        assert_eq!(format!("{deferred:?}"), "KernelMap { kind: Submanifold { kernel: 3 }, n_in: 6, n_out: 6, pairs: None }");
+        assert_eq!(deferred.out_table().as_slice(), eager.out_table().as_slice());
+        assert!(deferred.has_host_tables());
+        assert_eq!(deferred.in_table().as_slice(), eager.in_table().as_slice());
+        assert_eq!(deferred.pairs().input, eager.pairs().input);
+        assert_eq!(deferred.pairs_by_input().output, eager.pairs_by_input().output);
+        assert_eq!(deferred.transposed().out_table().as_slice(), eager.in_table().as_slice());
+    }
 
     #[test]
     fn submanifold_tables_are_consistent() {

@@ -1,7 +1,10 @@
 //! Where the op's work is: voxel coordinates and their index, the kernel maps that pair input and
-//! output voxels per offset, and the GPU's tile plans over those maps.
+//! output voxels per offset (on the host, and a GPU's own submanifold maps), and the GPU's tile
+//! plans over those maps.
 
 pub mod coords;
+#[cfg(feature = "cube")]
+pub(crate) mod device_maps;
 pub mod kernel_map;
 #[cfg(feature = "cube")]
 pub(crate) mod row_tiles;

@@ -17,7 +17,8 @@
 //! otherwise).
 //!
 //! The map's tables go to the device once per map and device and stay with the map
-//! ([`KernelMap::attachment`]), so a U-Net's layers sharing one map share one upload.
+//! ([`KernelMap::attachment`]), so a U-Net's layers sharing one map share one upload; a deferred
+//! submanifold map's are built there instead (`crate::geometry::device_maps`).
 //!
 //! f32 runs here; other float types fall back to the composition of Burn primitives.
 
@@ -34,6 +35,7 @@ use burn_cubecl::kernel::into_contiguous;
 use burn_cubecl::tensor::CubeTensor;
 use burn_cubecl::{CubeBackend, CubeDevice};
 
+use crate::geometry::device_maps::{DevicePairs, DeviceSubmanifold};
 use crate::geometry::kernel_map::{KernelMap, NeighborTable};
 use crate::geometry::row_tiles::RowTiles;
 use crate::profile::{Kernel, in_kernel};
@@ -436,6 +438,10 @@ impl GatherTables {
     fn upload(client: &Client, table: &NeighborTable) -> Self {
         Self { table: in_kernel(Kernel::Upload, || upload_u32(client, table.as_slice())), tiles: OnceLock::new() }
     }
+
+    fn on_device(table: &Handle) -> Self {
+        Self { table: table.clone(), tiles: OnceLock::new() }
+    }
 }
 
 /// [`RowTiles`] on a device.
@@ -456,12 +462,40 @@ struct DeviceTables {
     backward: OnceLock<GatherTables>,
     /// `start`, `input`, `output` of [`crate::geometry::kernel_map::OffsetPairs`].
     pairs: OnceLock<[Handle; 3]>,
+    /// A deferred submanifold map's tables and pairs, built on the device.
+    built: OnceLock<DeviceSubmanifold>,
+    built_pairs: OnceLock<DevicePairs>,
+}
+
+impl DeviceTables {
+    /// A deferred map's tables, built here from its coordinates the first time.
+    fn built(&self, map: &KernelMap, client: &Client) -> Option<&DeviceSubmanifold> {
+        let (coords, stride) = map.deferred_source()?;
+        let crate::MapKind::Submanifold { kernel } = map.kind() else { return None };
+        Some(self.built.get_or_init(|| in_kernel(Kernel::MapBuild, || DeviceSubmanifold::build(client, coords, kernel, stride))))
+    }
+
+    /// The forward's (`backward` false) or the feature gradient's gather table.
+    fn gather(&self, map: &KernelMap, client: &Client, backward: bool) -> &GatherTables {
+        let side = if backward { &self.backward } else { &self.forward };
+        side.get_or_init(|| match self.built(map, client) {
+            Some(built) => GatherTables::on_device(if backward { &built.backward } else { &built.forward }),
+            None => GatherTables::upload(client, if backward { map.in_table() } else { map.out_table() }),
+        })
+    }
 }
 
 fn tables(map: &KernelMap, device: &CubeDevice) -> Arc<DeviceTables> {
     map.attachment(
         |t: &DeviceTables| &t.device == device,
-        || DeviceTables { device: device.clone(), forward: OnceLock::new(), backward: OnceLock::new(), pairs: OnceLock::new() },
+        || DeviceTables {
+            device: device.clone(),
+            forward: OnceLock::new(),
+            backward: OnceLock::new(),
+            pairs: OnceLock::new(),
+            built: OnceLock::new(),
+            built_pairs: OnceLock::new(),
+        },
     )
 }
 
@@ -511,10 +545,11 @@ fn vectors(t: &CubeTensor, vector: usize) -> BufferArg {
 }
 
 /// `out[o] = Σ_k src[table[o, k]] · w_k` for `w` laid out `[K, C_red, C_out]`, over the rows of
-/// `table` (whose device copy is `gather`).
-fn gather_conv(src: CubeTensor, weight: CubeTensor, gather: &GatherTables, table: &NeighborTable) -> CubeTensor {
+/// the map's forward table (`backward`: its feature gradient's), whose device copy is `gather`.
+fn gather_conv(src: CubeTensor, weight: CubeTensor, gather: &GatherTables, map: &KernelMap, backward: bool) -> CubeTensor {
     let [_, c_red, c_out] = weight.meta.shape().dims();
-    let (n_src, rows, volume) = (src.meta.shape()[0], table.rows(), table.volume());
+    let (n_src, volume) = (src.meta.shape()[0], map.volume());
+    let rows = if backward { map.n_in() } else { map.n_out() };
     if rows * c_out == 0 || n_src * c_red == 0 {
         // Nothing to gather (and wgpu cannot bind an empty buffer).
         return zeros(&src, Shape::new([rows, c_out]));
@@ -551,7 +586,11 @@ fn gather_conv(src: CubeTensor, weight: CubeTensor, gather: &GatherTables, table
         });
         return out;
     }
-    let plan = gather.tiles.get_or_init(|| upload_tiles(&client, table, n_src));
+    // The tile plan is made on the host from the host table (a deferred map's is built for it).
+    let plan = gather.tiles.get_or_init(|| {
+        let table = in_kernel(Kernel::MapBuild, || if backward { map.in_table() } else { map.out_table() });
+        upload_tiles(&client, table, n_src)
+    });
     let step_vectors = (c_red / vector).next_power_of_two().min(STEP_VECTORS);
     let count = CubeCount::Static(col_tiles as u32, plan.tiles as u32, 1);
     let dim = CubeDim::new_1d((tile_vectors * TILE_ROWS / UNIT_ROWS) as u32);
@@ -589,8 +628,8 @@ fn gather_conv(src: CubeTensor, weight: CubeTensor, gather: &GatherTables, table
 pub(crate) fn forward(features: CubeTensor, weight: CubeTensor, map: &KernelMap) -> CubeTensor {
     let (features, weight) = (contiguous(features), contiguous(weight));
     let tables = tables(map, &features.device);
-    let gather = tables.forward.get_or_init(|| GatherTables::upload(&features.client, map.out_table()));
-    gather_conv(features, weight, gather, map.out_table())
+    let gather = tables.gather(map, &features.client, false);
+    gather_conv(features, weight, gather, map, false)
 }
 
 /// Feature gradient on a cube device (f32): the forward's gather over the transposed map, with
@@ -599,8 +638,8 @@ pub(crate) fn input_grad(grad_out: CubeTensor, weight: CubeTensor, map: &KernelM
     let grad_out = contiguous(grad_out);
     let weight_t = into_contiguous(CubeBackend::float_swap_dims(weight, 1, 2));
     let tables = tables(map, &grad_out.device);
-    let gather = tables.backward.get_or_init(|| GatherTables::upload(&grad_out.client, map.in_table()));
-    gather_conv(grad_out, weight_t, gather, map.in_table())
+    let gather = tables.gather(map, &grad_out.client, true);
+    gather_conv(grad_out, weight_t, gather, map, true)
 }
 
 /// `out = Σ_s partial[s]` for a contiguous `partial` of `slices` blocks of `out`'s size.
@@ -618,18 +657,29 @@ fn sum_slices(partial: &CubeTensor, out: &CubeTensor, slices: usize, vector: usi
 pub(crate) fn weight_grad(features: CubeTensor, grad_out: CubeTensor, map: &KernelMap) -> CubeTensor {
     let (features, grad_out) = (contiguous(features), contiguous(grad_out));
     let (c_in, c_out, volume) = (features.meta.shape()[1], grad_out.meta.shape()[1], map.volume());
-    // The pairs grouped by offset are made from the table on first use: map work.
-    let num_pairs = in_kernel(Kernel::MapBuild, || map.pairs().input.len());
-    if num_pairs * c_in * c_out == 0 {
-        return zeros(&features, Shape::new([volume, c_in, c_out]));
-    }
     let client = features.client.clone();
     let device_tables = tables(map, &features.device);
-    let [start, input, output] = device_tables.pairs.get_or_init(|| {
-        let pairs = map.pairs();
-        let start: Vec<u32> = pairs.start.iter().map(|&s| s as u32).collect();
-        in_kernel(Kernel::Upload, || [upload_u32(&client, &start), upload_u32(&client, &pairs.input), upload_u32(&client, &pairs.output)])
-    });
+    // A deferred map's pairs are built on the device, their count unknown to the host: the
+    // buffers have room for every (row, offset) and the kernel reads each offset's range there.
+    let (num_pairs, [start, input, output]) = match device_tables.built(map, &client) {
+        Some(built) => {
+            let pairs = device_tables.built_pairs.get_or_init(|| in_kernel(Kernel::MapBuild, || built.pairs(&client)));
+            (pairs.capacity, [&pairs.start, &pairs.input, &pairs.output])
+        }
+        None => {
+            // The pairs grouped by offset are made from the table on first use: map work.
+            let num_pairs = in_kernel(Kernel::MapBuild, || map.pairs().input.len());
+            let [start, input, output] = device_tables.pairs.get_or_init(|| {
+                let pairs = map.pairs();
+                let start: Vec<u32> = pairs.start.iter().map(|&s| s as u32).collect();
+                in_kernel(Kernel::Upload, || [upload_u32(&client, &start), upload_u32(&client, &pairs.input), upload_u32(&client, &pairs.output)])
+            });
+            (num_pairs, [start, input, output])
+        }
+    };
+    if num_pairs * c_in * c_out == 0 || map.n_in() * map.n_out() == 0 {
+        return zeros(&features, Shape::new([volume, c_in, c_out]));
+    }
     let vector = widest_block(&[c_in, c_out]);
     let (in_vectors, out_vectors) = (tile_vectors(c_in / vector), tile_vectors(c_out / vector));
     let (in_tiles, out_tiles) = ((c_in / vector).div_ceil(in_vectors), (c_out / vector).div_ceil(out_vectors));
@@ -670,6 +720,12 @@ pub(crate) fn weight_grad(features: CubeTensor, grad_out: CubeTensor, map: &Kern
     let summed = empty_f32(&features, shape);
     sum_slices(&partial, &summed, slices, vector);
     summed
+}
+
+/// Whether `device` (with or without autodiff) is a CubeCL device, where the kernels here run and
+/// submanifold maps are built on the device.
+pub(crate) fn is_cube_device(device: &burn::tensor::Device) -> bool {
+    matches!(device.clone().inner().as_dispatch(), burn::backend::DispatchDevice::Cube(_))
 }
 
 /// Whether the kernels here handle tensors of this dtype.

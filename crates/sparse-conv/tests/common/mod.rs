@@ -297,7 +297,10 @@ pub fn backends_agree_on_random_cases() {
     eprintln!("comparing flex with: {:?}", devices[1..].iter().map(|(n, _)| *n).collect::<Vec<_>>());
     let dense_coords = random_coords(&mut r, 6000, 1, 12, 1);
     let dense = Arc::new(KernelMap::submanifold(&dense_coords, &CoordIndex::build(&dense_coords).unwrap(), 3, 1));
-    let cases = [("submanifold", &subm, [8, 16]), ("down", &down, [8, 16]), ("up", &up, [8, 16]), ("submanifold", &subm, [72, 136]), ("up", &up, [136, 72]), ("submanifold", &subm, [6, 10]), ("dense submanifold", &dense, [8, 16]), ("dense submanifold", &dense, [72, 136]), ("dense submanifold", &dense, [136, 72])];
+    // Deferred maps: on a GPU built there (`geometry::device_maps`), on the CPU on first use.
+    let deferred = Arc::new(KernelMap::submanifold_deferred(coords.clone().into(), 3, 1));
+    let dense_deferred = Arc::new(KernelMap::submanifold_deferred(dense_coords.clone().into(), 3, 1));
+    let cases = [("deferred submanifold", &deferred, [8, 16]), ("dense deferred submanifold", &dense_deferred, [72, 136]), ("submanifold", &subm, [8, 16]), ("down", &down, [8, 16]), ("up", &up, [8, 16]), ("submanifold", &subm, [72, 136]), ("up", &up, [136, 72]), ("submanifold", &subm, [6, 10]), ("dense submanifold", &dense, [8, 16]), ("dense submanifold", &dense, [72, 136]), ("dense submanifold", &dense, [136, 72])];
     for (name, map, c) in cases {
         let x = random_values(&mut r, map.n_in() * c[0]);
         let w = random_values(&mut r, map.volume() * c[0] * c[1]);

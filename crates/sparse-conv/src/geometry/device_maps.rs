@@ -1,0 +1,391 @@
+//! Submanifold kernel maps built on a GPU: a forward pass uploads each level's coordinates
+//! (16 bytes a voxel) instead of building and uploading its tables (27 × 4 bytes a voxel each
+//! way, and the host's hashing and probing).
+//!
+//! - a hash of the coordinates: open addressing over `u32` slots holding `row + 1`, claimed with
+//!   a compare-and-swap (32-bit atomics, which every Vulkan driver has) and compared on all four
+//!   coordinates, so no key packing limits the range;
+//! - the forward's table: one unit per (row, offset) probes for `row + offset`; the feature
+//!   gradient's table is the same entry at the negated offset `volume − 1 − k`;
+//! - the weight gradient's pairs grouped by offset, in output-row order within an offset, as
+//!   `KernelMap::pairs` orders them on the host: a count per (offset, block of rows), one scan,
+//!   and a scatter that walks each block's rows in order.
+//!
+//! The tables equal the host's ([`KernelMap::submanifold`]) entry for entry, tested on lavapipe.
+//!
+//! [`KernelMap::submanifold`]: crate::KernelMap::submanifold
+
+use burn_cubecl::cubecl;
+use burn_cubecl::cubecl::client::Client;
+use burn_cubecl::cubecl::prelude::*;
+use burn_cubecl::cubecl::server::Handle;
+
+use crate::geometry::coords::Coord;
+use crate::geometry::kernel_map::offsets;
+
+/// Rows a unit of the pair count and scatter walks.
+const BLOCK_ROWS: usize = 512;
+
+/// A submanifold map's tables on a device.
+pub(crate) struct DeviceSubmanifold {
+    /// `rows × volume`: for each output row, its input row at each offset (`NONE`: none).
+    pub forward: Handle,
+    /// `rows × volume`: for each input row, its output row at each offset.
+    pub backward: Handle,
+    /// The tables' rows and offsets.
+    rows: usize,
+    volume: usize,
+}
+
+/// The weight gradient's pairs on a device: `start` has `volume + 1` entries (read on the device
+/// only); `input` and `output` have room for every (row, offset), the first `start[volume]` used.
+pub(crate) struct DevicePairs {
+    pub start: Handle,
+    pub input: Handle,
+    pub output: Handle,
+    /// Entries `input` and `output` have room for.
+    pub capacity: usize,
+}
+
+fn upload_i32(client: &Client, values: &[i32]) -> Handle {
+    // wgpu cannot bind an empty buffer.
+    client.create_from_slice(i32::as_bytes(if values.is_empty() { &[0] } else { values }))
+}
+
+fn zeroed_u32(client: &Client, len: usize) -> Handle {
+    client.create_from_slice(u32::as_bytes(&vec![0u32; len.max(1)]))
+}
+
+fn launch_1d(client: &Client, units: usize) -> (CubeCount, CubeDim) {
+    let dim = CubeDim::new_1d(256);
+    (cubecl::calculate_cube_count_elemwise(client, units.max(1), dim), dim)
+}
+
+impl DeviceSubmanifold {
+    /// The tables of the submanifold map of an odd `kernel` over `coords` at tensor `stride`.
+    /// `coords` must be unique (a [`crate::SparseTensor`]'s are).
+    pub fn build(client: &Client, coords: &[Coord], kernel: usize, stride: i32) -> Self {
+        let rows = coords.len();
+        let offsets: Vec<i32> = offsets(kernel, -(kernel as i32 / 2), stride).into_iter().flatten().collect();
+        let volume = offsets.len() / 3;
+        let flat: Vec<i32> = coords.iter().flatten().copied().collect();
+        let coords_handle = upload_i32(client, &flat);
+        let capacity = (2 * rows).next_power_of_two().max(64);
+        let slots = zeroed_u32(client, capacity);
+        let forward = client.empty(rows.max(1) * volume * size_of::<u32>());
+        let backward = client.empty(rows.max(1) * volume * size_of::<u32>());
+        if rows > 0 {
+            let mask = (capacity - 1) as u32;
+            let (count, dim) = launch_1d(client, rows);
+            // Safety: unit `r < rows` reads coordinates `4r..4r + 4`; slots are masked to the
+            // table's power-of-two capacity, which is at least twice the rows (never full).
+            unsafe {
+                hash_insert_kernel::launch_unchecked(
+                    client,
+                    count,
+                    dim,
+                    BufferArg::from_raw_parts(coords_handle.clone(), 4 * rows),
+                    BufferArg::from_raw_parts(slots.clone(), capacity),
+                    rows,
+                    mask,
+                );
+            }
+            let offsets_handle = upload_i32(client, &offsets);
+            let (count, dim) = launch_1d(client, rows * volume);
+            // Safety: unit `(r, k)` with `r < rows`, `k < volume` writes entry `(r, k)` of the
+            // forward table and `(r, volume − 1 − k)` of the backward one; probes are masked.
+            unsafe {
+                submanifold_table_kernel::launch_unchecked(
+                    client,
+                    count,
+                    dim,
+                    BufferArg::from_raw_parts(coords_handle, 4 * rows),
+                    BufferArg::from_raw_parts(slots, capacity),
+                    BufferArg::from_raw_parts(offsets_handle, 3 * volume),
+                    BufferArg::from_raw_parts(forward.clone(), rows * volume),
+                    BufferArg::from_raw_parts(backward.clone(), rows * volume),
+                    rows,
+                    volume,
+                    mask,
+                );
+            }
+        }
+        Self { forward, backward, rows, volume }
+    }
+
+    /// The forward table's pairs grouped by offset, output rows in order within an offset.
+    pub fn pairs(&self, client: &Client) -> DevicePairs {
+        let (rows, volume) = (self.rows, self.volume);
+        let capacity = (rows * volume).max(1);
+        let blocks = rows.div_ceil(BLOCK_ROWS).max(1);
+        let counts = client.empty(volume * blocks * size_of::<u32>());
+        let firsts = client.empty(volume * blocks * size_of::<u32>());
+        let start = zeroed_u32(client, volume + 1);
+        let input = client.empty(capacity * size_of::<u32>());
+        let output = client.empty(capacity * size_of::<u32>());
+        if rows > 0 {
+            // Safety: the forward table holds `rows · volume` entries.
+            let table = || unsafe { BufferArg::from_raw_parts(self.forward.clone(), rows * volume) };
+            let (count, dim) = launch_1d(client, volume * blocks);
+            // Safety: unit `(k, b)` reads rows `b·BLOCK_ROWS..` below `rows` at offset `k` and
+            // writes its own count.
+            unsafe {
+                pair_count_kernel::launch_unchecked(
+                    client,
+                    count.clone(),
+                    dim,
+                    table(),
+                    BufferArg::from_raw_parts(counts.clone(), volume * blocks),
+                    rows,
+                    volume,
+                    blocks,
+                    BLOCK_ROWS,
+                );
+            }
+            // Safety: one unit reads `volume · blocks` counts and writes as many firsts and
+            // `volume + 1` starts.
+            unsafe {
+                pair_scan_kernel::launch_unchecked(
+                    client,
+                    CubeCount::Static(1, 1, 1),
+                    CubeDim::new_1d(1),
+                    BufferArg::from_raw_parts(counts, volume * blocks),
+                    BufferArg::from_raw_parts(firsts.clone(), volume * blocks),
+                    BufferArg::from_raw_parts(start.clone(), volume + 1),
+                    volume,
+                    blocks,
+                );
+            }
+            // Safety: unit `(k, b)` writes its block's pairs of offset `k` from its first, the
+            // scan's sum of the counts before it: ranges of distinct units do not overlap and
+            // end at most at `rows · volume`.
+            unsafe {
+                pair_scatter_kernel::launch_unchecked(
+                    client,
+                    count,
+                    dim,
+                    table(),
+                    BufferArg::from_raw_parts(firsts, volume * blocks),
+                    BufferArg::from_raw_parts(input.clone(), capacity),
+                    BufferArg::from_raw_parts(output.clone(), capacity),
+                    rows,
+                    volume,
+                    blocks,
+                    BLOCK_ROWS,
+                );
+            }
+        }
+        DevicePairs { start, input, output, capacity }
+    }
+}
+
+/// A slot for coordinate `(b, x, y, z)`, before masking: a multiplicative mix of the four.
+#[cube]
+fn slot_of(b: i32, x: i32, y: i32, z: i32) -> u32 {
+    let mut h = u32::cast_from(b) * 0x9E37_79B1u32;
+    h = (h ^ u32::cast_from(x)) * 0x85EB_CA77u32;
+    h = (h ^ u32::cast_from(y)) * 0xC2B2_AE3Du32;
+    h = (h ^ u32::cast_from(z)) * 0x27D4_EB2Fu32;
+    h ^ (h >> 15u32)
+}
+
+/// Claims a slot for each row: the first empty one from the coordinate's own, by linear probing.
+#[cube(launch_unchecked)]
+fn hash_insert_kernel(coords: &[i32], slots: &mut [Atomic<u32>], rows: usize, mask: u32) {
+    let r = ABSOLUTE_POS;
+    if r >= rows {
+        terminate!();
+    }
+    let mine = r as u32 + 1u32;
+    let mut h = slot_of(coords[4 * r], coords[4 * r + 1], coords[4 * r + 2], coords[4 * r + 3]) & mask;
+    loop {
+        let previous = slots[h as usize].compare_exchange_weak(0u32, mine);
+        if previous == 0u32 {
+            break;
+        }
+        h = (h + 1u32) & mask;
+    }
+}
+
+/// Entry `(r, k)` of the forward table, `r + offset_k`'s row or `NONE` (`u32::MAX`), and the same entry at
+/// the negated offset of the backward table.
+#[cube(launch_unchecked)]
+#[allow(clippy::too_many_arguments)]
+fn submanifold_table_kernel(
+    coords: &[i32],
+    slots: &[u32],
+    offsets: &[i32],
+    forward: &mut [u32],
+    backward: &mut [u32],
+    rows: usize,
+    volume: usize,
+    mask: u32,
+) {
+    let pos = ABSOLUTE_POS;
+    if pos >= rows * volume {
+        terminate!();
+    }
+    let r = pos / volume;
+    let k = pos % volume;
+    let b = coords[4 * r];
+    let x = coords[4 * r + 1] + offsets[3 * k];
+    let y = coords[4 * r + 2] + offsets[3 * k + 1];
+    let z = coords[4 * r + 3] + offsets[3 * k + 2];
+    let mut h = slot_of(b, x, y, z) & mask;
+    let mut found = 0xFFFF_FFFFu32;
+    loop {
+        let slot = slots[h as usize];
+        if slot == 0u32 {
+            break;
+        }
+        let o = (slot - 1u32) as usize;
+        if coords[4 * o] == b && coords[4 * o + 1] == x && coords[4 * o + 2] == y && coords[4 * o + 3] == z {
+            found = slot - 1u32;
+            break;
+        }
+        h = (h + 1u32) & mask;
+    }
+    forward[r * volume + k] = found;
+    backward[r * volume + (volume - 1 - k)] = found;
+}
+
+/// `counts[k · blocks + b]`: the rows of block `b` with a partner at offset `k`.
+#[cube(launch_unchecked)]
+fn pair_count_kernel(table: &[u32], counts: &mut [u32], rows: usize, volume: usize, blocks: usize, #[comptime] block_rows: usize) {
+    let pos = ABSOLUTE_POS;
+    if pos >= volume * blocks {
+        terminate!();
+    }
+    let k = pos / blocks;
+    let first = (pos % blocks) * block_rows;
+    let mut count = 0u32;
+    for j in 0..block_rows {
+        let r = first + j;
+        if r < rows {
+            if table[r * volume + k] != 0xFFFF_FFFFu32 {
+                count += 1u32;
+            }
+        }
+    }
+    counts[pos] = count;
+}
+
+/// Where each (offset, block)'s pairs begin, offset by offset and block by block, and where each
+/// offset's begin (`start[volume]`: all pairs). One unit: a few thousand additions.
+#[cube(launch_unchecked)]
+fn pair_scan_kernel(counts: &[u32], firsts: &mut [u32], start: &mut [u32], volume: usize, blocks: usize) {
+    if ABSOLUTE_POS >= 1 {
+        terminate!();
+    }
+    let mut next = 0u32;
+    for k in 0..volume {
+        start[k] = next;
+        for b in 0..blocks {
+            firsts[k * blocks + b] = next;
+            next += counts[k * blocks + b];
+        }
+    }
+    start[volume] = next;
+}
+
+/// Writes block `b`'s pairs of offset `k` (input: the partner, output: the row) in row order from
+/// the block's first slot.
+#[cube(launch_unchecked)]
+#[allow(clippy::too_many_arguments)]
+fn pair_scatter_kernel(
+    table: &[u32],
+    firsts: &[u32],
+    input: &mut [u32],
+    output: &mut [u32],
+    rows: usize,
+    volume: usize,
+    blocks: usize,
+    #[comptime] block_rows: usize,
+) {
+    let pos = ABSOLUTE_POS;
+    if pos >= volume * blocks {
+        terminate!();
+    }
+    let k = pos / blocks;
+    let first = (pos % blocks) * block_rows;
+    let mut at = firsts[pos] as usize;
+    for j in 0..block_rows {
+        let r = first + j;
+        if r < rows {
+            let partner = table[r * volume + k];
+            if partner != 0xFFFF_FFFFu32 {
+                input[at] = partner;
+                output[at] = r as u32;
+                at += 1;
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::coords::CoordIndex;
+    use crate::geometry::kernel_map::KernelMap;
+
+    fn client() -> Option<Client> {
+        let device = match crate::wgpu_device() {
+            Ok(device) => device,
+            Err(e) if std::env::var("PMUNET_REQUIRE_WGPU").is_ok_and(|v| v == "1") => panic!("PMUNET_REQUIRE_WGPU=1 but {e}"),
+            Err(e) => {
+                eprintln!("skipping the device maps' test: {e}");
+                return None;
+            }
+        };
+        match device.as_dispatch() {
+            burn::backend::DispatchDevice::Cube(d) => Some(d.client()),
+            _ => unreachable!("wgpu_device is a cube device"),
+        }
+    }
+
+    fn read_u32(client: &Client, handle: &Handle, len: usize) -> Vec<u32> {
+        let bytes = client.read_one(handle.clone()).expect("read back");
+        u32::from_bytes(&bytes)[..len].to_vec()
+    }
+
+    /// Unique coordinates on the grid of `stride`: two batch entries, negative and positive
+    /// coordinates, clusters dense enough that most offsets find a neighbour somewhere.
+    fn scene(n: usize, stride: i32, seed: u64) -> Vec<Coord> {
+        let mut state = seed;
+        let mut next = |m: i32| {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            ((state >> 33) % m as u64) as i32
+        };
+        let mut coords: Vec<Coord> =
+            (0..n).map(|_| [next(2), (next(21) - 10) * stride, (next(17) - 8) * stride, (next(9) - 4) * stride]).collect();
+        coords.sort();
+        coords.dedup();
+        // Not sorted: the device must not rely on the order.
+        let len = coords.len();
+        for i in 0..len {
+            coords.swap(i, (i * 7919) % len);
+        }
+        coords
+    }
+
+    #[test]
+    fn device_tables_and_pairs_are_the_hosts() {
+        let Some(client) = client() else { return };
+        for (n, stride, kernel) in [(0, 1, 3), (1, 1, 3), (900, 1, 3), (2500, 2, 3), (700, 4, 5), (3000, 1, 1)] {
+            let coords = scene(n, stride, n as u64 + 1);
+            let host = KernelMap::submanifold(&coords, &CoordIndex::build(&coords).unwrap(), kernel, stride);
+            let device = DeviceSubmanifold::build(&client, &coords, kernel, stride);
+            let (rows, volume) = (coords.len(), host.volume());
+            let what = format!("{rows} rows, stride {stride}, kernel {kernel}");
+            assert_eq!(read_u32(&client, &device.forward, rows * volume), host.out_table().as_slice(), "forward table, {what}");
+            assert_eq!(read_u32(&client, &device.backward, rows * volume), host.in_table().as_slice(), "backward table, {what}");
+            let pairs = device.pairs(&client);
+            let expected = host.pairs();
+            let start: Vec<usize> = read_u32(&client, &pairs.start, volume + 1).into_iter().map(|s| s as usize).collect();
+            assert_eq!(start, expected.start, "pair starts, {what}");
+            let total = expected.input.len();
+            assert_eq!(read_u32(&client, &pairs.input, total), expected.input, "pair inputs, {what}");
+            assert_eq!(read_u32(&client, &pairs.output, total), expected.output, "pair outputs, {what}");
+        }
+    }
+}
