@@ -44,3 +44,34 @@ fn composed_reference_agrees_with_the_kernels() {
         assert_close(&values(gw), &kernels.gw, 1e-5, &format!("{name}: composed weight gradient"));
     }
 }
+
+/// A `SparseTensor` on wgpu builds its submanifold maps on the device: after a forward and
+/// backward pass nothing on the host has built their tables, and the output and gradients are
+/// flex's (which builds them on the host).
+#[test]
+fn a_gpu_tensor_builds_its_submanifold_maps_on_the_device() {
+    let Some(wgpu) = wgpu_device() else { return };
+    let mut r = rng(23);
+    let coords = random_coords(&mut r, 3000, 2, 10, 1);
+    let (c_in, c_out) = (8, 12);
+    let x = random_values(&mut r, coords.len() * c_in);
+    let w = random_values(&mut r, 27 * c_in * c_out);
+    let run = |device: &Device| {
+        let ad = device.clone().autodiff();
+        let xt = tensor2(&x, [coords.len(), c_in], &ad, DType::F32).require_grad();
+        let wt = tensor3(&w, [27, c_in, c_out], &ad, DType::F32).require_grad();
+        let input = sparse_conv::SparseTensor::new(xt.clone(), coords.clone()).unwrap();
+        let map = input.submanifold_map(3);
+        let out = sparse_conv::sparse_conv(input.features(), wt.clone(), &map);
+        let grads = (out.clone() * out.clone()).sum().backward();
+        let host_tables = map.has_host_tables();
+        (values(out), values(xt.grad(&grads).unwrap()), values(wt.grad(&grads).unwrap()), host_tables)
+    };
+    let (out, gx, gw, host_tables) = run(&wgpu);
+    assert!(!host_tables, "the host built a GPU tensor's submanifold tables");
+    let (out_flex, gx_flex, gw_flex, host_tables_flex) = run(&Device::flex());
+    assert!(host_tables_flex);
+    assert_close(&out, &out_flex, 1e-5, "output");
+    assert_close(&gx, &gx_flex, 1e-5, "feature gradient");
+    assert_close(&gw, &gw_flex, 1e-5, "weight gradient");
+}
