@@ -250,6 +250,9 @@ fn submanifold_table_kernel(
 }
 
 /// `counts[k · blocks + b]`: the rows of block `b` with a partner at offset `k`.
+// The row's bound is checked before the table is read, in its own `if`: a kernel's `&&` need not
+// short-circuit.
+#[allow(clippy::collapsible_if)]
 #[cube(launch_unchecked)]
 fn pair_count_kernel(table: &[u32], counts: &mut [u32], rows: usize, volume: usize, blocks: usize, #[comptime] block_rows: usize) {
     let pos = ABSOLUTE_POS;
