@@ -3,7 +3,8 @@
 //! way, and the host's hashing and probing).
 //!
 //! - a hash of the coordinates: open addressing over `u32` slots holding `row + 1`, claimed with
-//!   a compare-and-swap (32-bit atomics, which every Vulkan driver has) and compared on all four
+//!   a compare-and-swap (32-bit atomics, which every Vulkan driver has; a weak exchange's spurious
+//!   failure is told from a lost race by reading the slot back) and compared on all four
 //!   coordinates, so no key packing limits the range;
 //! - the forward's table: one unit per (row, offset) probes for `row + offset`; the feature
 //!   gradient's table is the same entry at the negated offset `volume − 1 − k`;
@@ -201,9 +202,18 @@ fn hash_insert_kernel(coords: &[i32], slots: &mut [Atomic<u32>], rows: usize, ma
     loop {
         let previous = slots[h as usize].compare_exchange_weak(0u32, mine);
         if previous == 0u32 {
-            break;
+            // A weak exchange may fail with no competitor (WGSL's may, on Metal through naga):
+            // the slot says whether it took. Empty still: try the same slot again.
+            let now = slots[h as usize].load();
+            if now == mine {
+                break;
+            }
+            if now != 0u32 {
+                h = (h + 1u32) & mask;
+            }
+        } else {
+            h = (h + 1u32) & mask;
         }
-        h = (h + 1u32) & mask;
     }
 }
 
