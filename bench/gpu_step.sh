@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Where a full-width Person-MinkUNet's step goes on a GPU, for wgpu and CUDA in one run (issue 48's
 # yardstick): the batch-2 training step and one-frame inference on the standard scene with the
-# host's parts of the op (kernel maps, tile plans, uploads, dispatch), the batch-16 step's frames
+# host's parts of the op (kernel maps, tile plans, uploads, dispatch), with submanifold maps built
+# on the host (`--gpu-maps host`, the path before) and on the device, the batch-16 step's frames
 # per second against batch 2's, then one profiled batch-2 step whose kernels CubeCL times one by
 # one (each synchronised, so that run is slower; it gives the device time by kernel family, and
 # against the unprofiled step how busy the GPU is).
@@ -24,6 +25,11 @@ trap 'rm -rf "$dir"' EXIT
 for backend in $backends; do
     echo "== $backend"
     "$bench" --backend "$backend" --coords "$scene" --batch 1 --only infer --runs 10 --warmup 3 || continue
+    # Before device maps, for the same run's ratio: submanifold maps built on the host and uploaded.
+    echo "-- submanifold maps built on the host (--gpu-maps host):"
+    "$bench" --backend "$backend" --coords "$scene" --batch 1 --only infer --runs 10 --warmup 3 --gpu-maps host
+    "$bench" --backend "$backend" --coords "$scene" --batch 2 --only train --runs 10 --warmup 3 --gpu-maps host
+    echo "-- built on the device (the default):"
     "$bench" --backend "$backend" --coords "$scene" --batch 2 --only train --runs 10 --warmup 3 | tee "$dir/b2.txt"
     "$bench" --backend "$backend" --coords "$scene" --batch 16 --only train --runs 5 --warmup 2 | tee "$dir/b16.txt"
     b2=$(grep -o 'training step *[0-9.]*' "$dir/b2.txt" | awk '{print $3}')

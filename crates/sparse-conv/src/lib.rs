@@ -42,7 +42,7 @@ pub use optim::adam::{AdamBackend, FusedAdam, FusedAdamConfig};
 pub use geometry::coords::{Coord, CoordError, CoordIndex};
 pub use geometry::kernel_map::{KernelMap, MapKind, NeighborTable};
 pub use kernels::cpu::{cpu_features, cpu_kernel_path, cached_tile_gflops, fma_peak_gflops};
-pub use options::{CpuKernels, KernelOptions};
+pub use options::{CpuKernels, GpuMaps, KernelOptions};
 pub use tensor::{MapCache, SparseTensor};
 pub use wgpu_device::wgpu_device;
 pub use cuda_device::cuda_device;

@@ -1,8 +1,9 @@
-//! The op's kernel knobs: which CPU kernels run and when the GPU gather is tiled. The library
+//! The op's kernel knobs: which CPU kernels run, when the GPU gather is tiled and where a GPU's
+//! submanifold maps are built. The library
 //! never reads the environment; an application sets these once, before its first convolution
 //! (the runner from its config's `[kernels]` table, the benchmark binaries from their flags).
 
-use std::sync::atomic::{AtomicU8, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU8, AtomicUsize, Ordering};
 
 use serde::{Deserialize, Serialize};
 
@@ -41,9 +42,20 @@ impl CpuKernels {
     }
 }
 
+/// Where a tensor on a GPU gets its submanifold maps' tables.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "snake_case")]
+pub enum GpuMaps {
+    /// Built on the device from the level's coordinates (`geometry::device_maps`).
+    #[default]
+    Device,
+    /// Built on the host and uploaded, as the CPU backends build them (to compare the two).
+    Host,
+}
+
 /// Every knob of the op's kernels; the defaults are what the benchmarks chose. It is a TOML table
 /// (`[kernels]` of a run's config) and a set of command-line flags (`--cpu-kernels`,
-/// `--gpu-tiled-min-cubes`) alike.
+/// `--gpu-tiled-min-cubes`, `--gpu-maps`) alike.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::Args)]
 #[serde(default, deny_unknown_fields)]
 pub struct KernelOptions {
@@ -56,19 +68,23 @@ pub struct KernelOptions {
     /// its plan on an H100 (`crates/sparse-conv/README.md`).
     #[arg(long, default_value_t = DEFAULT_TILED_MIN_CUBES)]
     pub gpu_tiled_min_cubes: usize,
+    /// Where a GPU tensor's submanifold maps are built: `device` or `host`.
+    #[arg(long, value_enum, default_value_t = GpuMaps::Device)]
+    pub gpu_maps: GpuMaps,
 }
 
 const DEFAULT_TILED_MIN_CUBES: usize = 2048;
 
 impl Default for KernelOptions {
     fn default() -> Self {
-        Self { cpu: CpuKernels::Auto, gpu_tiled_min_cubes: DEFAULT_TILED_MIN_CUBES }
+        Self { cpu: CpuKernels::Auto, gpu_tiled_min_cubes: DEFAULT_TILED_MIN_CUBES, gpu_maps: GpuMaps::Device }
     }
 }
 
 /// [`CpuKernels`] as a byte ([`CpuKernels::to_byte`]).
 static CPU: AtomicU8 = AtomicU8::new(0);
 static TILED_MIN_CUBES: AtomicUsize = AtomicUsize::new(DEFAULT_TILED_MIN_CUBES);
+static MAPS_ON_HOST: AtomicBool = AtomicBool::new(false);
 
 impl KernelOptions {
     /// Makes these the options of every later convolution in the process. Set them before the
@@ -77,11 +93,13 @@ impl KernelOptions {
     pub fn apply(self) {
         CPU.store(self.cpu.to_byte(), Ordering::Relaxed);
         TILED_MIN_CUBES.store(self.gpu_tiled_min_cubes, Ordering::Relaxed);
+        MAPS_ON_HOST.store(self.gpu_maps == GpuMaps::Host, Ordering::Relaxed);
     }
 
     /// The options in effect.
     pub fn current() -> Self {
         let cpu = CpuKernels::from_byte(CPU.load(Ordering::Relaxed));
-        Self { cpu, gpu_tiled_min_cubes: TILED_MIN_CUBES.load(Ordering::Relaxed) }
+        let gpu_maps = if MAPS_ON_HOST.load(Ordering::Relaxed) { GpuMaps::Host } else { GpuMaps::Device };
+        Self { cpu, gpu_tiled_min_cubes: TILED_MIN_CUBES.load(Ordering::Relaxed), gpu_maps }
     }
 }

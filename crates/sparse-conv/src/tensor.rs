@@ -100,7 +100,7 @@ impl SparseTensor {
         if let Some(map) = self.cache.get(key) {
             return map;
         }
-        let map = if on_gpu(&self.features) {
+        let map = if on_gpu(&self.features) && crate::KernelOptions::current().gpu_maps == crate::GpuMaps::Device {
             // The GPU kernels build its tables on the device (`geometry::device_maps`).
             Arc::new(KernelMap::submanifold_deferred(self.coords.clone(), kernel, self.stride))
         } else {

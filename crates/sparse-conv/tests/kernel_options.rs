@@ -1,5 +1,5 @@
 //! Every CPU kernel choice of `KernelOptions` gives the f64 composition's outputs and gradients in
-//! f32, the SIMD levels each other's bits, and the choice holds until changed. Its own test binary: the options are process-wide, and
+//! f32, the SIMD levels each other's bits, and the choice holds until changed; so do the GPU's. Its own test binary: the options are process-wide, and
 //! the thread-count tests elsewhere compare bits within one choice.
 
 mod common;
@@ -8,7 +8,7 @@ use std::sync::Arc;
 
 use common::*;
 use sparse_conv::burn::tensor::{DType, Device};
-use sparse_conv::{CoordIndex, CpuKernels, KernelMap, KernelOptions};
+use sparse_conv::{CoordIndex, CpuKernels, GpuMaps, KernelMap, KernelOptions};
 
 #[test]
 fn every_cpu_kernel_choice_matches_the_f64_result() {
@@ -45,5 +45,15 @@ fn every_cpu_kernel_choice_matches_the_f64_result() {
     }
     println!("paths: {paths:?}");
     KernelOptions { gpu_tiled_min_cubes: 0, ..Default::default() }.apply();
-    assert_eq!(KernelOptions::current(), KernelOptions { cpu: CpuKernels::Auto, gpu_tiled_min_cubes: 0 });
+    assert_eq!(KernelOptions::current(), KernelOptions { cpu: CpuKernels::Auto, gpu_tiled_min_cubes: 0, gpu_maps: GpuMaps::Device });
+    // Where a GPU tensor's submanifold maps are built follows the option.
+    for gpu_maps in [GpuMaps::Host, GpuMaps::Device] {
+        KernelOptions { gpu_maps, ..Default::default() }.apply();
+        assert_eq!(KernelOptions::current().gpu_maps, gpu_maps);
+        if let Some(device) = wgpu_device() {
+            let features = sparse_conv::burn::tensor::Tensor::<2>::ones([coords.len(), 2], &device);
+            let map = sparse_conv::SparseTensor::new(features, coords.clone()).unwrap().submanifold_map(3);
+            assert_eq!(map.has_host_tables(), gpu_maps == GpuMaps::Host, "{gpu_maps:?}");
+        }
+    }
 }

@@ -72,7 +72,14 @@ impl DeviceSubmanifold {
         let flat: Vec<i32> = coords.iter().flatten().copied().collect();
         let coords_handle = upload_i32(client, &flat);
         let capacity = (2 * rows).next_power_of_two().max(64);
-        let slots = zeroed_u32(client, capacity);
+        // Zeroed by a kernel, not uploaded: a build runs in the middle of a forward pass, and an
+        // upload there may wait for the queue.
+        let slots = client.empty(capacity * size_of::<u32>());
+        let (count, dim) = launch_1d(client, capacity);
+        // Safety: unit `i < capacity` writes slot `i`.
+        unsafe {
+            fill_kernel::launch_unchecked(client, count, dim, BufferArg::from_raw_parts(slots.clone(), capacity), capacity, 0u32);
+        }
         let forward = client.empty(rows.max(1) * volume * size_of::<u32>());
         let backward = client.empty(rows.max(1) * volume * size_of::<u32>());
         if rows > 0 {
@@ -121,7 +128,8 @@ impl DeviceSubmanifold {
         let blocks = rows.div_ceil(BLOCK_ROWS).max(1);
         let counts = client.empty(volume * blocks * size_of::<u32>());
         let firsts = client.empty(volume * blocks * size_of::<u32>());
-        let start = zeroed_u32(client, volume + 1);
+        // The scan writes every start; with no rows nothing runs, so those are zeroed here.
+        let start = if rows == 0 { zeroed_u32(client, volume + 1) } else { client.empty((volume + 1) * size_of::<u32>()) };
         let input = client.empty(capacity * size_of::<u32>());
         let output = client.empty(capacity * size_of::<u32>());
         if rows > 0 {
@@ -178,6 +186,15 @@ impl DeviceSubmanifold {
         }
         DevicePairs { start, input, output, capacity }
     }
+}
+
+/// `values[i] = value` for `i < len`.
+#[cube(launch_unchecked)]
+fn fill_kernel(values: &mut [u32], len: usize, value: u32) {
+    if ABSOLUTE_POS >= len {
+        terminate!();
+    }
+    values[ABSOLUTE_POS] = value;
 }
 
 /// A slot for coordinate `(b, x, y, z)`, before masking: a multiplicative mix of the four.
