@@ -9,8 +9,8 @@
 //! - the forward's table: one unit per (row, offset) probes for `row + offset`; the feature
 //!   gradient's table is the same entry at the negated offset `volume − 1 − k`;
 //! - the weight gradient's pairs grouped by offset, in output-row order within an offset, as
-//!   `KernelMap::pairs` orders them on the host: a count per (offset, block of rows), one scan,
-//!   and a scatter that walks each block's rows in order.
+//!   `KernelMap::pairs` orders them on the host: a count per (offset, block of rows), a scan by
+//!   one cube, and a scatter that walks each block's rows in order.
 //!
 //! The tables equal the host's ([`KernelMap::submanifold`]) entry for entry, tested on lavapipe.
 //!
@@ -26,6 +26,9 @@ use crate::geometry::kernel_map::offsets;
 
 /// Rows a unit of the pair count and scatter walks.
 const BLOCK_ROWS: usize = 512;
+
+/// Units of the one cube that scans the pair counts.
+const SCAN_UNITS: usize = 256;
 
 /// A submanifold map's tables on a device.
 pub(crate) struct DeviceSubmanifold {
@@ -151,18 +154,19 @@ impl DeviceSubmanifold {
                     BLOCK_ROWS,
                 );
             }
-            // Safety: one unit reads `volume · blocks` counts and writes as many firsts and
-            // `volume + 1` starts.
+            // Safety: one cube reads `volume · blocks` counts and writes as many firsts and
+            // `volume + 1` starts; its units' stretches are clamped to the counts.
             unsafe {
                 pair_scan_kernel::launch_unchecked(
                     client,
                     CubeCount::Static(1, 1, 1),
-                    CubeDim::new_1d(1),
+                    CubeDim::new_1d(SCAN_UNITS as u32),
                     BufferArg::from_raw_parts(counts, volume * blocks),
                     BufferArg::from_raw_parts(firsts.clone(), volume * blocks),
                     BufferArg::from_raw_parts(start.clone(), volume + 1),
                     volume,
                     blocks,
+                    SCAN_UNITS,
                 );
             }
             // Safety: unit `(k, b)` writes its block's pairs of offset `k` from its first, the
@@ -301,21 +305,43 @@ fn pair_count_kernel(table: &[u32], counts: &mut [u32], rows: usize, volume: usi
 }
 
 /// Where each (offset, block)'s pairs begin, offset by offset and block by block, and where each
-/// offset's begin (`start[volume]`: all pairs). One unit: a few thousand additions.
+/// offset's begin (`start[volume]`: all pairs): an exclusive scan of the counts by one cube, each
+/// of its `units` units over its own stretch of them, the stretches' sums scanned by the first.
 #[cube(launch_unchecked)]
-fn pair_scan_kernel(counts: &[u32], firsts: &mut [u32], start: &mut [u32], volume: usize, blocks: usize) {
-    if ABSOLUTE_POS >= 1 {
-        terminate!();
+fn pair_scan_kernel(counts: &[u32], firsts: &mut [u32], start: &mut [u32], volume: usize, blocks: usize, #[comptime] units: usize) {
+    let len = volume * blocks;
+    let u = UNIT_POS as usize;
+    let stretch = len.div_ceil(units);
+    let from = u * stretch;
+    let mut to = from + stretch;
+    if to > len {
+        to = len;
     }
-    let mut next = 0u32;
-    for k in 0..volume {
-        start[k] = next;
-        for b in 0..blocks {
-            firsts[k * blocks + b] = next;
-            next += counts[k * blocks + b];
+    let mut partial = Shared::<[u32]>::new_slice(units);
+    let mut sum = 0u32;
+    for i in from..to {
+        sum += counts[i];
+    }
+    partial[u] = sum;
+    sync_cube();
+    if u == 0 {
+        let mut run = 0u32;
+        for j in 0..units {
+            let c = partial[j];
+            partial[j] = run;
+            run += c;
         }
+        start[volume] = run;
     }
-    start[volume] = next;
+    sync_cube();
+    let mut next = partial[u];
+    for i in from..to {
+        firsts[i] = next;
+        if i % blocks == 0 {
+            start[i / blocks] = next;
+        }
+        next += counts[i];
+    }
 }
 
 /// Writes block `b`'s pairs of offset `k` (input: the partner, output: the row) in row order from
@@ -401,7 +427,9 @@ mod tests {
     #[test]
     fn device_tables_and_pairs_are_the_hosts() {
         let Some(client) = client() else { return };
-        for (n, stride, kernel) in [(0, 1, 3), (1, 1, 3), (900, 1, 3), (2500, 2, 3), (700, 4, 5), (3000, 1, 1)] {
+        // The last two scan more counts (offsets × blocks of rows) than the scan has units.
+        let mut longer_than_the_scan = 0;
+        for (n, stride, kernel) in [(0, 1, 3), (1, 1, 3), (900, 1, 3), (2500, 2, 3), (700, 4, 5), (3000, 1, 1), (12000, 1, 3), (5000, 2, 5)] {
             let coords = scene(n, stride, n as u64 + 1);
             let host = KernelMap::submanifold(&coords, &CoordIndex::build(&coords).unwrap(), kernel, stride);
             let device = DeviceSubmanifold::build(&client, &coords, kernel, stride);
@@ -416,6 +444,8 @@ mod tests {
             let total = expected.input.len();
             assert_eq!(read_u32(&client, &pairs.input, total), expected.input, "pair inputs, {what}");
             assert_eq!(read_u32(&client, &pairs.output, total), expected.output, "pair outputs, {what}");
+            longer_than_the_scan += (volume * rows.div_ceil(BLOCK_ROWS) > SCAN_UNITS) as usize;
         }
+        assert_eq!(longer_than_the_scan, 2);
     }
 }
