@@ -307,6 +307,8 @@ fn pair_count_kernel(table: &[u32], counts: &mut [u32], rows: usize, volume: usi
 /// Where each (offset, block)'s pairs begin, offset by offset and block by block, and where each
 /// offset's begin (`start[volume]`: all pairs): an exclusive scan of the counts by one cube, each
 /// of its `units` units over its own stretch of them, the stretches' sums scanned by the first.
+// CubeCL kernels index their buffers; they have no slice iterators.
+#[allow(clippy::needless_range_loop)]
 #[cube(launch_unchecked)]
 fn pair_scan_kernel(counts: &[u32], firsts: &mut [u32], start: &mut [u32], volume: usize, blocks: usize, #[comptime] units: usize) {
     let len = volume * blocks;
