@@ -9,6 +9,9 @@
 #
 #   bash bench/gpu_step.sh [BACKENDS]      (default: "wgpu cuda"; MODEL_BENCH=path/to/model-bench)
 #
+# For a trial of the script itself on a small machine: RUNS (timed runs, default 10), LARGE_BATCH
+# (default 16) and MODEL_BENCH_ARGS (added to every call, e.g. "--width 0.125").
+#
 # Build the binary where Cargo is (nothing large is built here):
 #   cargo build -p bench --bin model-bench --features cuda
 # and carry target/debug/model-bench and bench/scene_jrdb_like.npy to the GPU machine. A backend
@@ -17,6 +20,9 @@ set -uo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 backends=${1:-wgpu cuda}
 bench=${MODEL_BENCH:-$root/target/debug/model-bench}
+runs=${RUNS:-10}
+large=${LARGE_BATCH:-16}
+read -r -a extra <<< "${MODEL_BENCH_ARGS:-}"
 scene=$root/bench/scene_jrdb_like.npy
 [ -x "$bench" ] || { echo "no model-bench at $bench (MODEL_BENCH=…, or build it as above)" >&2; exit 2; }
 command -v nvidia-smi >/dev/null && nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader
@@ -24,22 +30,22 @@ dir=$(mktemp -d)
 trap 'rm -rf "$dir"' EXIT
 for backend in $backends; do
     echo "== $backend"
-    "$bench" --backend "$backend" --coords "$scene" --batch 1 --only infer --runs 10 --warmup 3 || continue
+    "$bench" --backend "$backend" --coords "$scene" --batch 1 --only infer --runs "$runs" --warmup 3 "${extra[@]}" || continue
     # Before device maps, for the same run's ratio: submanifold maps built on the host and uploaded.
     echo "-- submanifold maps built on the host (--gpu-maps host):"
-    "$bench" --backend "$backend" --coords "$scene" --batch 1 --only infer --runs 10 --warmup 3 --gpu-maps host
-    "$bench" --backend "$backend" --coords "$scene" --batch 2 --only train --runs 10 --warmup 3 --gpu-maps host
+    "$bench" --backend "$backend" --coords "$scene" --batch 1 --only infer --runs "$runs" --warmup 3 --gpu-maps host "${extra[@]}"
+    "$bench" --backend "$backend" --coords "$scene" --batch 2 --only train --runs "$runs" --warmup 3 --gpu-maps host "${extra[@]}"
     echo "-- built on the device (the default):"
-    "$bench" --backend "$backend" --coords "$scene" --batch 2 --only train --runs 10 --warmup 3 | tee "$dir/b2.txt"
-    "$bench" --backend "$backend" --coords "$scene" --batch 16 --only train --runs 5 --warmup 2 | tee "$dir/b16.txt"
+    "$bench" --backend "$backend" --coords "$scene" --batch 2 --only train --runs "$runs" --warmup 3 "${extra[@]}" | tee "$dir/b2.txt"
+    "$bench" --backend "$backend" --coords "$scene" --batch "$large" --only train --runs $(( (runs + 1) / 2 )) --warmup 2 "${extra[@]}" | tee "$dir/b16.txt"
     b2=$(grep -o 'training step *[0-9.]*' "$dir/b2.txt" | awk '{print $3}')
     b16=$(grep -o 'training step *[0-9.]*' "$dir/b16.txt" | awk '{print $3}')
-    awk -v a="$b2" -v b="$b16" 'BEGIN { if (a > 0 && b > 0) printf "  frames/s: batch 2 %.1f, batch 16 %.1f (%.2fx)\n", 2000 / a, 16000 / b, (16000 / b) / (2000 / a) }'
+    awk -v a="$b2" -v b="$b16" -v n="$large" 'BEGIN { if (a > 0 && b > 0) printf "  frames/s: batch 2 %.1f, batch %d %.1f (%.2fx)\n", 2000 / a, n, 1000 * n / b, (1000 * n / b) / (2000 / a) }'
     # CubeCL reads cubecl.toml from the working directory.
     printf '[profiling]\nlogger = { level = "basic", file = "%s/prof-%s.log", append = false }\n' "$dir" "$backend" > "$dir/cubecl.toml"
-    runs=3
-    (cd "$dir" && "$bench" --backend "$backend" --coords "$scene" --batch 2 --only train --runs $runs --warmup 0 > /dev/null)
-    grep "^| [0-9]" "$dir/prof-$backend.log" | awk -F'|' -v runs=$runs -v step="$b2" '
+    profiled=3
+    (cd "$dir" && "$bench" --backend "$backend" --coords "$scene" --batch 2 --only train --runs $profiled --warmup 0 "${extra[@]}" > /dev/null)
+    grep "^| [0-9]" "$dir/prof-$backend.log" | awk -F'|' -v runs=$profiled -v step="$b2" '
         { name = $3; gsub(/^ +| +$/, "", name); d = $2; gsub(/ /, "", d); v = d + 0
           if (d ~ /µs/) v /= 1000; else if (d ~ /ns/) v /= 1e6; else if (d !~ /ms/ && d ~ /s$/) v *= 1000
           family = (name ~ /GatherConv|DirectGather/) ? "op: gather (fwd, feature grad)" \
