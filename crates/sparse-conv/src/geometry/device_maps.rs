@@ -23,6 +23,7 @@ use burn_cubecl::cubecl::server::Handle;
 
 use crate::geometry::coords::Coord;
 use crate::geometry::kernel_map::offsets;
+use crate::kernels::cube::upload;
 
 /// Rows a unit of the pair count and scatter walks.
 const BLOCK_ROWS: usize = 512;
@@ -51,15 +52,6 @@ pub(crate) struct DevicePairs {
     pub capacity: usize,
 }
 
-fn upload_i32(client: &Client, values: &[i32]) -> Handle {
-    // wgpu cannot bind an empty buffer.
-    client.create_from_slice(i32::as_bytes(if values.is_empty() { &[0] } else { values }))
-}
-
-fn zeroed_u32(client: &Client, len: usize) -> Handle {
-    client.create_from_slice(u32::as_bytes(&vec![0u32; len.max(1)]))
-}
-
 fn launch_1d(client: &Client, units: usize) -> (CubeCount, CubeDim) {
     let dim = CubeDim::new_1d(256);
     (cubecl::calculate_cube_count_elemwise(client, units.max(1), dim), dim)
@@ -73,7 +65,7 @@ impl DeviceSubmanifold {
         let offsets: Vec<i32> = offsets(kernel, -(kernel as i32 / 2), stride).into_iter().flatten().collect();
         let volume = offsets.len() / 3;
         let flat: Vec<i32> = coords.iter().flatten().copied().collect();
-        let coords_handle = upload_i32(client, &flat);
+        let coords_handle = upload(client, &flat);
         let capacity = (2 * rows).next_power_of_two().max(64);
         // Zeroed by a kernel, not uploaded: a build runs in the middle of a forward pass, and an
         // upload there may wait for the queue.
@@ -101,7 +93,7 @@ impl DeviceSubmanifold {
                     mask,
                 );
             }
-            let offsets_handle = upload_i32(client, &offsets);
+            let offsets_handle = upload(client, &offsets);
             let (count, dim) = launch_1d(client, rows * volume);
             // Safety: unit `(r, k)` with `r < rows`, `k < volume` writes entry `(r, k)` of the
             // forward table and `(r, volume − 1 − k)` of the backward one; probes are masked.
@@ -132,7 +124,7 @@ impl DeviceSubmanifold {
         let counts = client.empty(volume * blocks * size_of::<u32>());
         let firsts = client.empty(volume * blocks * size_of::<u32>());
         // The scan writes every start; with no rows nothing runs, so those are zeroed here.
-        let start = if rows == 0 { zeroed_u32(client, volume + 1) } else { client.empty((volume + 1) * size_of::<u32>()) };
+        let start = if rows == 0 { upload(client, &vec![0u32; volume + 1]) } else { client.empty((volume + 1) * size_of::<u32>()) };
         let input = client.empty(capacity * size_of::<u32>());
         let output = client.empty(capacity * size_of::<u32>());
         if rows > 0 {

@@ -436,7 +436,7 @@ struct GatherTables {
 
 impl GatherTables {
     fn upload(client: &Client, table: &NeighborTable) -> Self {
-        Self { table: in_kernel(Kernel::Upload, || upload_u32(client, table.as_slice())), tiles: OnceLock::new() }
+        Self { table: in_kernel(Kernel::Upload, || upload(client, table.as_slice())), tiles: OnceLock::new() }
     }
 
     fn on_device(table: &Handle) -> Self {
@@ -499,17 +499,18 @@ fn tables(map: &KernelMap, device: &CubeDevice) -> Arc<DeviceTables> {
     )
 }
 
-fn upload_u32(client: &Client, values: &[u32]) -> Handle {
-    // wgpu cannot bind an empty buffer.
-    client.create_from_slice(u32::as_bytes(if values.is_empty() { &[0] } else { values }))
+/// `values` on the device; one zero for none (wgpu cannot bind an empty buffer).
+pub(crate) fn upload<E: CubeElement + Default>(client: &Client, values: &[E]) -> Handle {
+    let zero = [E::default()];
+    client.create_from_slice(E::as_bytes(if values.is_empty() { &zero } else { values }))
 }
 
 fn upload_tiles(client: &Client, table: &NeighborTable, n_src: usize) -> TilePlan {
     let tiles = in_kernel(Kernel::TilePlan, || RowTiles::new(table, n_src, TILE_ROWS));
     in_kernel(Kernel::Upload, || TilePlan {
-        order: upload_u32(client, &tiles.order),
-        start: upload_u32(client, &tiles.start),
-        offsets: upload_u32(client, &tiles.offsets),
+        order: upload(client, &tiles.order),
+        start: upload(client, &tiles.start),
+        offsets: upload(client, &tiles.offsets),
         tiles: tiles.tiles(),
         offsets_len: tiles.offsets.len().max(1),
     })
@@ -672,7 +673,7 @@ pub(crate) fn weight_grad(features: CubeTensor, grad_out: CubeTensor, map: &Kern
             let [start, input, output] = device_tables.pairs.get_or_init(|| {
                 let pairs = map.pairs();
                 let start: Vec<u32> = pairs.start.iter().map(|&s| s as u32).collect();
-                in_kernel(Kernel::Upload, || [upload_u32(&client, &start), upload_u32(&client, &pairs.input), upload_u32(&client, &pairs.output)])
+                in_kernel(Kernel::Upload, || [upload(&client, &start), upload(&client, &pairs.input), upload(&client, &pairs.output)])
             });
             (num_pairs, [start, input, output])
         }
