@@ -29,7 +29,7 @@ use crate::kernels::cube::upload;
 const BLOCK_ROWS: usize = 512;
 
 /// Units of the one cube that scans the pair counts.
-const SCAN_UNITS: usize = 256;
+pub(crate) const SCAN_UNITS: usize = 256;
 
 /// A submanifold map's tables on a device.
 pub(crate) struct DeviceSubmanifold {
@@ -52,7 +52,7 @@ pub(crate) struct DevicePairs {
     pub capacity: usize,
 }
 
-fn launch_1d(client: &Client, units: usize) -> (CubeCount, CubeDim) {
+pub(crate) fn launch_1d(client: &Client, units: usize) -> (CubeCount, CubeDim) {
     let dim = CubeDim::new_1d(256);
     (cubecl::calculate_cube_count_elemwise(client, units.max(1), dim), dim)
 }
@@ -302,7 +302,7 @@ fn pair_count_kernel(table: &[u32], counts: &mut [u32], rows: usize, volume: usi
 // CubeCL kernels index their buffers; they have no slice iterators.
 #[allow(clippy::needless_range_loop)]
 #[cube(launch_unchecked)]
-fn pair_scan_kernel(counts: &[u32], firsts: &mut [u32], start: &mut [u32], volume: usize, blocks: usize, #[comptime] units: usize) {
+pub(crate) fn pair_scan_kernel(counts: &[u32], firsts: &mut [u32], start: &mut [u32], volume: usize, blocks: usize, #[comptime] units: usize) {
     let len = volume * blocks;
     let u = UNIT_POS as usize;
     let stretch = len.div_ceil(units);
@@ -373,12 +373,12 @@ fn pair_scatter_kernel(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::geometry::coords::CoordIndex;
     use crate::geometry::kernel_map::KernelMap;
 
-    fn client() -> Option<Client> {
+    pub(crate) fn client() -> Option<Client> {
         let device = match crate::wgpu_device() {
             Ok(device) => device,
             Err(e) if std::env::var("PMUNET_REQUIRE_WGPU").is_ok_and(|v| v == "1") => panic!("PMUNET_REQUIRE_WGPU=1 but {e}"),
@@ -393,14 +393,14 @@ mod tests {
         }
     }
 
-    fn read_u32(client: &Client, handle: &Handle, len: usize) -> Vec<u32> {
+    pub(crate) fn read_u32(client: &Client, handle: &Handle, len: usize) -> Vec<u32> {
         let bytes = client.read_one(handle.clone()).expect("read back");
         u32::from_bytes(&bytes)[..len].to_vec()
     }
 
     /// Unique coordinates on the grid of `stride`: two batch entries, negative and positive
     /// coordinates, clusters dense enough that most offsets find a neighbour somewhere.
-    fn scene(n: usize, stride: i32, seed: u64) -> Vec<Coord> {
+    pub(crate) fn scene(n: usize, stride: i32, seed: u64) -> Vec<Coord> {
         let mut state = seed;
         let mut next = |m: i32| {
             state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);

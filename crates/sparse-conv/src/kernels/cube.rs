@@ -6,7 +6,7 @@
 //!   channels, stages its rows' partners and each used offset's weight in shared memory, and each
 //!   unit sums its rows' partners in offset order. A launch of fewer tiles than
 //!   `KernelOptions::gpu_tiled_min_cubes` (default 2048) runs the same sums untiled, one unit per few rows,
-//!   without the tile plan's host work. No
+//!   without a tile plan. No
 //!   atomics (the software Vulkan driver has no f32 atomics), and results do not depend on
 //!   scheduling;
 //! - the weight gradient gives each (offset, slice of its pairs, channel tile) a cube that stages
@@ -18,7 +18,8 @@
 //!
 //! The map's tables go to the device once per map and device and stay with the map
 //! ([`KernelMap::attachment`]), so a U-Net's layers sharing one map share one upload; a deferred
-//! submanifold map's are built there instead (`crate::geometry::device_maps`).
+//! submanifold map's are built there instead (`crate::geometry::device_maps`), and with device
+//! maps every tile plan is made there from the table on the device (`crate::geometry::device_tiles`).
 //!
 //! f32 runs here; other float types fall back to the composition of Burn primitives.
 
@@ -36,6 +37,7 @@ use burn_cubecl::tensor::CubeTensor;
 use burn_cubecl::{CubeBackend, CubeDevice};
 
 use crate::geometry::device_maps::{DevicePairs, DeviceSubmanifold};
+use crate::geometry::device_tiles::{DeviceRowTiles, MAX_VOLUME as MAX_PLAN_VOLUME};
 use crate::geometry::kernel_map::{KernelMap, NeighborTable};
 use crate::geometry::row_tiles::RowTiles;
 use crate::profile::{Kernel, in_kernel};
@@ -45,7 +47,8 @@ const TILE_ROWS: usize = 64;
 
 /// Fewest cubes the tiled gather takes on ([`KernelOptions::gpu_tiled_min_cubes`]); a smaller
 /// layer runs [`direct_gather_kernel`]. The tiled kernel needs the rows' tile plan ([`RowTiles`],
-/// made on the host once per map and side), which only a large enough launch repays.
+/// made once per map and side, on the device with device maps), which only a large enough launch
+/// repays.
 ///
 /// [`KernelOptions::gpu_tiled_min_cubes`]: crate::KernelOptions::gpu_tiled_min_cubes
 fn tiled_min_cubes() -> usize {
@@ -431,7 +434,7 @@ fn adam_kernel(
 struct GatherTables {
     table: Handle,
     /// The rows' tile plan, made the first time the tiled kernel runs on this side.
-    tiles: OnceLock<TilePlan>,
+    tiles: OnceLock<DeviceRowTiles>,
 }
 
 impl GatherTables {
@@ -442,16 +445,6 @@ impl GatherTables {
     fn on_device(table: &Handle) -> Self {
         Self { table: table.clone(), tiles: OnceLock::new() }
     }
-}
-
-/// [`RowTiles`] on a device.
-struct TilePlan {
-    order: Handle,
-    start: Handle,
-    offsets: Handle,
-    tiles: usize,
-    /// Entries of `offsets` (at least one: an empty list is uploaded as one unused entry).
-    offsets_len: usize,
 }
 
 /// A map's tables on one device, each uploaded the first time a kernel needs it.
@@ -505,14 +498,16 @@ pub(crate) fn upload<E: CubeElement + Default>(client: &Client, values: &[E]) ->
     client.create_from_slice(E::as_bytes(if values.is_empty() { &zero } else { values }))
 }
 
-fn upload_tiles(client: &Client, table: &NeighborTable, n_src: usize) -> TilePlan {
+/// The host's tile plan of `table`, uploaded.
+fn upload_tiles(client: &Client, table: &NeighborTable, n_src: usize) -> DeviceRowTiles {
     let tiles = in_kernel(Kernel::TilePlan, || RowTiles::new(table, n_src, TILE_ROWS));
-    in_kernel(Kernel::Upload, || TilePlan {
+    in_kernel(Kernel::Upload, || DeviceRowTiles {
         order: upload(client, &tiles.order),
         start: upload(client, &tiles.start),
         offsets: upload(client, &tiles.offsets),
         tiles: tiles.tiles(),
-        offsets_len: tiles.offsets.len().max(1),
+        // An empty list is uploaded as one unused entry.
+        offsets_capacity: tiles.offsets.len().max(1),
     })
 }
 
@@ -587,10 +582,15 @@ fn gather_conv(src: CubeTensor, weight: CubeTensor, gather: &GatherTables, map: 
         });
         return out;
     }
-    // The tile plan is made on the host from the host table (a deferred map's is built for it).
+    // With device maps the plan is made on the device from the table there; otherwise (or for
+    // kernels of more offsets than a mask holds) on the host, from the host table.
     let plan = gather.tiles.get_or_init(|| {
-        let table = in_kernel(Kernel::MapBuild, || if backward { map.in_table() } else { map.out_table() });
-        upload_tiles(&client, table, n_src)
+        if volume <= MAX_PLAN_VOLUME && crate::KernelOptions::current().gpu_maps == crate::GpuMaps::Device {
+            in_kernel(Kernel::TilePlan, || DeviceRowTiles::build(&client, &gather.table, rows, volume, n_src, TILE_ROWS))
+        } else {
+            let table = in_kernel(Kernel::MapBuild, || if backward { map.in_table() } else { map.out_table() });
+            upload_tiles(&client, table, n_src)
+        }
     });
     let step_vectors = (c_red / vector).next_power_of_two().min(STEP_VECTORS);
     let count = CubeCount::Static(col_tiles as u32, plan.tiles as u32, 1);
@@ -609,7 +609,7 @@ fn gather_conv(src: CubeTensor, weight: CubeTensor, gather: &GatherTables, map: 
             BufferArg::from_raw_parts(gather.table.clone(), rows * volume),
             BufferArg::from_raw_parts(plan.order.clone(), rows),
             BufferArg::from_raw_parts(plan.start.clone(), plan.tiles + 1),
-            BufferArg::from_raw_parts(plan.offsets.clone(), plan.offsets_len),
+            BufferArg::from_raw_parts(plan.offsets.clone(), plan.offsets_capacity),
             vectors(&out, vector),
             n_src as u32,
             rows,
