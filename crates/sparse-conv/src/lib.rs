@@ -41,6 +41,7 @@ pub use ops::output_grad::{OutputGradBackend, backward_from};
 pub use optim::adam::{AdamBackend, FusedAdam, FusedAdamConfig};
 pub use geometry::coords::{Coord, CoordError, CoordIndex};
 pub use geometry::kernel_map::{KernelMap, MapKind, NeighborTable};
+pub use geometry::level::LevelCoords;
 pub use kernels::cpu::{cpu_features, cpu_kernel_path, cached_tile_gflops, fma_peak_gflops};
 pub use options::{CpuKernels, GpuMaps, KernelOptions};
 pub use tensor::{MapCache, SparseTensor};

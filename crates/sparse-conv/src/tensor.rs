@@ -8,16 +8,19 @@ use burn::tensor::Tensor;
 use crate::profile::{Kernel, in_kernel};
 use crate::geometry::coords::{Coord, CoordError, CoordIndex};
 use crate::geometry::kernel_map::{KernelMap, MapKind};
+use crate::geometry::level::LevelCoords;
 
 /// Features `[N, C]` on the voxels `coords` of one level of a sparse network.
 ///
 /// Every tensor derived from one input (by convolutions, norms, concatenations) shares one
 /// [`MapCache`], so a U-Net builds each level's coordinates and each kernel map once per forward
-/// pass and its transposed convolutions reuse the down-sampling maps, as torchsparse does.
+/// pass and its transposed convolutions reuse the down-sampling maps, as torchsparse does. On a
+/// GPU (with [`crate::GpuMaps::Device`]) the coarser levels and every map are made on the device,
+/// and a coarse level's coordinates come to the host only if something there reads them.
 #[derive(Clone, Debug)]
 pub struct SparseTensor {
     features: Tensor<2>,
-    coords: Arc<[Coord]>,
+    level: Arc<LevelCoords>,
     stride: i32,
     cache: Arc<MapCache>,
 }
@@ -30,14 +33,14 @@ impl SparseTensor {
             return Err(CoordError::FeatureRows { features: rows, coords: coords.len() });
         }
         let index = CoordIndex::build(&coords)?;
-        let coords: Arc<[Coord]> = coords.into();
+        let level = Arc::new(LevelCoords::on_host(coords.into()));
         let cache = MapCache::default();
         {
             let mut state = cache.state.lock().unwrap();
-            state.levels.insert(1, coords.clone());
+            state.levels.insert(1, level.clone());
             state.indexes.insert(1, Arc::new(index));
         }
-        Ok(Self { features, coords, stride: 1, cache: Arc::new(cache) })
+        Ok(Self { features, level, stride: 1, cache: Arc::new(cache) })
     }
 
     /// Voxel features, `[N, C]`.
@@ -50,9 +53,15 @@ impl SparseTensor {
         self.features
     }
 
-    /// Voxel coordinates in finest-level units (multiples of the stride).
+    /// Voxel coordinates in finest-level units (multiples of the stride); a level made on a GPU
+    /// reads them back the first time.
     pub fn coords(&self) -> &Arc<[Coord]> {
-        &self.coords
+        self.level.host()
+    }
+
+    /// This level's coordinates, wherever they are.
+    pub fn level(&self) -> &Arc<LevelCoords> {
+        &self.level
     }
 
     /// Tensor stride: the voxel size of this level in finest-level voxels.
@@ -62,7 +71,7 @@ impl SparseTensor {
 
     /// Number of voxels.
     pub fn num_voxels(&self) -> usize {
-        self.coords.len()
+        self.level.len()
     }
 
     /// Number of feature channels.
@@ -72,8 +81,8 @@ impl SparseTensor {
 
     /// The same voxels with other features (same rows).
     pub fn with_features(&self, features: Tensor<2>) -> Self {
-        assert_eq!(features.dims()[0], self.coords.len(), "new features must keep one row per voxel");
-        Self { features, coords: self.coords.clone(), stride: self.stride, cache: self.cache.clone() }
+        assert_eq!(features.dims()[0], self.level.len(), "new features must keep one row per voxel");
+        Self { features, level: self.level.clone(), stride: self.stride, cache: self.cache.clone() }
     }
 
     /// Applies `f` to the features.
@@ -86,7 +95,7 @@ impl SparseTensor {
     pub fn cat(&self, other: &SparseTensor) -> Self {
         assert!(
             self.stride == other.stride
-                && (Arc::ptr_eq(&self.coords, &other.coords) || self.coords == other.coords),
+                && (Arc::ptr_eq(&self.level, &other.level) || self.coords() == other.coords()),
             "sparse concatenation needs identical coordinates (strides {} and {})",
             self.stride,
             other.stride
@@ -100,13 +109,14 @@ impl SparseTensor {
         if let Some(map) = self.cache.get(key) {
             return map;
         }
-        let map = if on_gpu(&self.features) && crate::KernelOptions::current().gpu_maps == crate::GpuMaps::Device {
+        let map = if maps_on_device(&self.features) {
             // The GPU kernels build its tables on the device (`geometry::device_maps`).
-            Arc::new(KernelMap::submanifold_deferred(self.coords.clone(), kernel, self.stride))
+            Arc::new(KernelMap::submanifold_deferred(self.level.clone(), kernel, self.stride))
         } else {
             in_kernel(Kernel::MapBuild, || {
-                let index = self.cache.index(self.stride, &self.coords);
-                Arc::new(KernelMap::submanifold(&self.coords, &index, kernel, self.stride))
+                let coords = self.coords();
+                let index = self.cache.index(self.stride, coords);
+                Arc::new(KernelMap::submanifold(coords, &index, kernel, self.stride))
             })
         };
         self.cache.insert(key, map.clone());
@@ -115,18 +125,35 @@ impl SparseTensor {
 
     /// The down-sampling map (kernel = stride = `kernel`) from this level and the coarser level's
     /// coordinates, built once per cache.
-    pub fn down_map(&self, kernel: usize) -> (Arc<KernelMap>, Arc<[Coord]>) {
+    pub fn down_map(&self, kernel: usize) -> (Arc<KernelMap>, Arc<LevelCoords>) {
         let key = (MapKind::Down { kernel }, self.stride);
         let out_stride = self.stride * kernel as i32;
         if let Some(map) = self.cache.get(key) {
             return (map, self.cache.level(out_stride).expect("a cached down map has its level"));
         }
-        let (map, coords) = in_kernel(Kernel::MapBuild, || KernelMap::down(&self.coords, kernel, self.stride))
-            .expect("coordinates of a sparse tensor are validated and on their level's grid");
-        let (map, coords) = (Arc::new(map), Arc::<[Coord]>::from(coords));
+        let (map, level) = in_kernel(Kernel::MapBuild, || self.down_on_device(kernel)).unwrap_or_else(|| {
+            let (map, coords) = in_kernel(Kernel::MapBuild, || KernelMap::down(self.coords(), kernel, self.stride))
+                .expect("coordinates of a sparse tensor are validated and on their level's grid");
+            (map, Arc::new(LevelCoords::on_host(coords.into())))
+        });
+        let map = Arc::new(map);
         self.cache.insert(key, map.clone());
-        self.cache.state.lock().unwrap().levels.entry(out_stride).or_insert_with(|| coords.clone());
+        self.cache.state.lock().unwrap().levels.entry(out_stride).or_insert(level);
         (map, self.cache.level(out_stride).unwrap())
+    }
+
+    /// The down-sampling map and coarse level built on the device, where this tensor's maps are.
+    fn down_on_device(&self, kernel: usize) -> Option<(KernelMap, Arc<LevelCoords>)> {
+        if !maps_on_device(&self.features) {
+            return None;
+        }
+        #[cfg(feature = "cube")]
+        return crate::kernels::cube::down_on_device(&self.features.device(), &self.level, kernel, self.stride);
+        #[cfg(not(feature = "cube"))]
+        {
+            let _ = kernel;
+            None
+        }
     }
 
     /// The transposed map back to the finer level this one was down-sampled from with `kernel`,
@@ -134,7 +161,7 @@ impl SparseTensor {
     ///
     /// # Panics
     /// If this level was not made by a down-sampling of `kernel` in the same forward pass.
-    pub fn up_map(&self, kernel: usize) -> (Arc<KernelMap>, Arc<[Coord]>, i32) {
+    pub fn up_map(&self, kernel: usize) -> (Arc<KernelMap>, Arc<LevelCoords>, i32) {
         let fine = self.stride / kernel as i32;
         assert!(
             fine >= 1 && fine * kernel as i32 == self.stride,
@@ -152,7 +179,7 @@ impl SparseTensor {
                 self.stride
             )
         });
-        let map = Arc::new(in_kernel(Kernel::MapBuild, || down.transposed()));
+        let map = Arc::new(in_kernel(Kernel::MapBuild, || KernelMap::transpose_of(&down)));
         self.cache.insert(up_key, map.clone());
         (map, coords, fine)
     }
@@ -163,9 +190,14 @@ impl SparseTensor {
     }
 
     /// A tensor on another level of the same cache.
-    pub(crate) fn on_level(&self, features: Tensor<2>, coords: Arc<[Coord]>, stride: i32) -> Self {
-        Self { features, coords, stride, cache: self.cache.clone() }
+    pub(crate) fn on_level(&self, features: Tensor<2>, level: Arc<LevelCoords>, stride: i32) -> Self {
+        Self { features, level, stride, cache: self.cache.clone() }
     }
+}
+
+/// Whether this tensor's maps are made on its device: a GPU's, unless `gpu_maps = "host"`.
+fn maps_on_device(features: &Tensor<2>) -> bool {
+    on_gpu(features) && crate::KernelOptions::current().gpu_maps == crate::GpuMaps::Device
 }
 
 /// Whether the features live on a GPU (a CubeCL device), whose submanifold maps are built there.
@@ -187,7 +219,7 @@ pub struct MapCache {
 
 #[derive(Default, Debug)]
 struct CacheState {
-    levels: HashMap<i32, Arc<[Coord]>>,
+    levels: HashMap<i32, Arc<LevelCoords>>,
     indexes: HashMap<i32, Arc<CoordIndex>>,
     maps: HashMap<(MapKind, i32), Arc<KernelMap>>,
 }
@@ -201,7 +233,7 @@ impl MapCache {
         self.state.lock().unwrap().maps.entry(key).or_insert(map);
     }
 
-    fn level(&self, stride: i32) -> Option<Arc<[Coord]>> {
+    fn level(&self, stride: i32) -> Option<Arc<LevelCoords>> {
         self.state.lock().unwrap().levels.get(&stride).cloned()
     }
 

@@ -75,3 +75,48 @@ fn a_gpu_tensor_builds_its_submanifold_maps_on_the_device() {
     assert_close(&gx, &gx_flex, 1e-5, "feature gradient");
     assert_close(&gw, &gw_flex, 1e-5, "weight gradient");
 }
+
+/// On wgpu a U-Net's levels are made on the device: after a down-sampling, a submanifold conv on
+/// the coarse level and the transposed conv back, forward and backward, the coarse level's
+/// coordinates never came to the host and no map built host tables; outputs and gradients are
+/// flex's.
+#[test]
+fn a_gpu_tensor_makes_its_coarse_levels_on_the_device() {
+    use sparse_conv::burn::module::Param;
+    use sparse_conv::modules::{SparseConv3d, SparseConvTranspose3d, SubmanifoldConv3d};
+    let Some(wgpu) = wgpu_device() else { return };
+    let mut r = rng(29);
+    // Negative coordinates too: the coarse voxels are floors, not truncations.
+    let coords: Vec<_> = random_coords(&mut r, 4000, 2, 12, 1).into_iter().map(|c| [c[0], c[1] - 6, c[2] - 5, c[3]]).collect();
+    let c = [6, 10, 7];
+    let x = random_values(&mut r, coords.len() * c[0]);
+    let w = [random_values(&mut r, 8 * c[0] * c[1]), random_values(&mut r, 27 * c[1] * c[1]), random_values(&mut r, 8 * c[1] * c[2])];
+    let run = |device: &Device| {
+        let ad = device.clone().autodiff();
+        let param = |i: usize, k: usize, shape: [usize; 2]| Param::from_tensor(tensor3(&w[i], [k, shape[0], shape[1]], &ad, DType::F32));
+        let down = SparseConv3d { weight: param(0, 8, [c[0], c[1]]), kernel_size: 2 };
+        let coarse_conv = SubmanifoldConv3d { weight: param(1, 27, [c[1], c[1]]), kernel_size: 3 };
+        let up = SparseConvTranspose3d { weight: param(2, 8, [c[1], c[2]]), kernel_size: 2 };
+        let xt = tensor2(&x, [coords.len(), c[0]], &ad, DType::F32).require_grad();
+        let input = sparse_conv::SparseTensor::new(xt.clone(), coords.clone()).unwrap();
+        let coarse = coarse_conv.forward(down.forward(input.clone()));
+        let out = up.forward(coarse.clone());
+        assert_eq!(out.num_voxels(), coords.len());
+        let features = out.into_features();
+        let grads = (features.clone() * features.clone()).sum().backward();
+        let maps = [input.down_map(2).0, coarse.submanifold_map(3), coarse.up_map(2).0];
+        let on_host = (coarse.level().is_on_host(), maps.iter().map(|m| m.has_host_tables()).collect::<Vec<_>>());
+        let gw: Vec<Vec<f64>> = [&down.weight, &coarse_conv.weight, &up.weight].iter().map(|p| values(p.val().grad(&grads).unwrap())).collect();
+        (values(features), values(xt.grad(&grads).unwrap()), gw, coarse.num_voxels(), on_host)
+    };
+    let (out, gx, gw, coarse, on_host) = run(&wgpu);
+    assert_eq!(on_host, (false, vec![false; 3]), "(coarse coordinates on the host, maps with host tables) on wgpu");
+    let (out_flex, gx_flex, gw_flex, coarse_flex, on_host_flex) = run(&Device::flex());
+    assert_eq!(on_host_flex, (true, vec![true; 3]));
+    assert_eq!(coarse, coarse_flex, "coarse voxels");
+    assert_close(&out, &out_flex, 1e-5, "output");
+    assert_close(&gx, &gx_flex, 1e-5, "feature gradient");
+    for (i, (a, b)) in gw.iter().zip(&gw_flex).enumerate() {
+        assert_close(a, b, 1e-5, &format!("weight gradient of layer {i}"));
+    }
+}

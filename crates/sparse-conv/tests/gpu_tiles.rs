@@ -24,7 +24,7 @@ fn tiled_gather_agrees_with_the_cpu_backends() {
     // its tables, pairs and tile plans are all made on the device.
     let mut r = common::rng(5);
     let coords = common::random_coords(&mut r, 3000, 2, 16, 1);
-    let map = Arc::new(KernelMap::submanifold_deferred(coords.into(), 3, 1));
+    let map = Arc::new(KernelMap::submanifold_deferred(Arc::new(sparse_conv::LevelCoords::on_host(coords.into())), 3, 1));
     let c = [8, 16];
     let (x, w, g) = (common::random_values(&mut r, map.n_in() * c[0]), common::random_values(&mut r, map.volume() * c[0] * c[1]), common::random_values(&mut r, map.n_out() * c[1]));
     let on_gpu = common::conv_outputs(&map, &x, &w, &g, c, &wgpu);

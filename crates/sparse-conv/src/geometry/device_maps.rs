@@ -1,6 +1,8 @@
-//! Submanifold kernel maps built on a GPU: a forward pass uploads each level's coordinates
-//! (16 bytes a voxel) instead of building and uploading its tables (27 × 4 bytes a voxel each
-//! way, and the host's hashing and probing).
+//! Kernel maps built on a GPU: a forward pass has each level's coordinates on the device (the
+//! input's uploaded, 16 bytes a voxel, the coarser levels made there by
+//! `crate::geometry::device_down`) instead of building and uploading its tables (27 × 4 bytes a
+//! voxel each way for a submanifold map, and the host's hashing and probing). Here: the
+//! submanifold maps and, for every map kind, the weight gradient's pairs.
 //!
 //! - a hash of the coordinates: open addressing over `u32` slots holding `row + 1`, claimed with
 //!   a compare-and-swap (32-bit atomics, which every Vulkan driver has; a weak exchange's spurious
@@ -21,7 +23,6 @@ use burn_cubecl::cubecl::client::Client;
 use burn_cubecl::cubecl::prelude::*;
 use burn_cubecl::cubecl::server::Handle;
 
-use crate::geometry::coords::Coord;
 use crate::geometry::kernel_map::offsets;
 use crate::kernels::cube::upload;
 
@@ -31,15 +32,15 @@ const BLOCK_ROWS: usize = 512;
 /// Units of the one cube that scans the pair counts.
 pub(crate) const SCAN_UNITS: usize = 256;
 
-/// A submanifold map's tables on a device.
-pub(crate) struct DeviceSubmanifold {
+/// A map's tables on a device.
+pub(crate) struct DeviceMap {
     /// `rows × volume`: for each output row, its input row at each offset (`NONE`: none).
     pub forward: Handle,
-    /// `rows × volume`: for each input row, its output row at each offset.
+    /// For each input row, its output row at each offset.
     pub backward: Handle,
-    /// The tables' rows and offsets.
-    rows: usize,
-    volume: usize,
+    /// The forward table's rows (the map's outputs) and offsets.
+    pub rows: usize,
+    pub volume: usize,
 }
 
 /// The weight gradient's pairs on a device: `start` has `volume + 1` entries (read on the device
@@ -57,15 +58,19 @@ pub(crate) fn launch_1d(client: &Client, units: usize) -> (CubeCount, CubeDim) {
     (cubecl::calculate_cube_count_elemwise(client, units.max(1), dim), dim)
 }
 
-impl DeviceSubmanifold {
-    /// The tables of the submanifold map of an odd `kernel` over `coords` at tensor `stride`.
-    /// `coords` must be unique (a [`crate::SparseTensor`]'s are).
-    pub fn build(client: &Client, coords: &[Coord], kernel: usize, stride: i32) -> Self {
-        let rows = coords.len();
+impl DeviceMap {
+    /// The same tables read the other way: the map transposed, whose outputs are the `rows`
+    /// inputs of this one.
+    pub fn transposed(&self, rows: usize) -> Self {
+        Self { forward: self.backward.clone(), backward: self.forward.clone(), rows, volume: self.volume }
+    }
+
+    /// The tables of the submanifold map of an odd `kernel` over the `rows` coordinates `coords`
+    /// (`[rows, 4]` `i32` on the device) at tensor `stride`. The coordinates must be unique (a
+    /// [`crate::SparseTensor`]'s are).
+    pub fn submanifold(client: &Client, coords_handle: &Handle, rows: usize, kernel: usize, stride: i32) -> Self {
         let offsets: Vec<i32> = offsets(kernel, -(kernel as i32 / 2), stride).into_iter().flatten().collect();
         let volume = offsets.len() / 3;
-        let flat: Vec<i32> = coords.iter().flatten().copied().collect();
-        let coords_handle = upload(client, &flat);
         let capacity = (2 * rows).next_power_of_two().max(64);
         // Zeroed by a kernel, not uploaded: a build runs in the middle of a forward pass, and an
         // upload there may wait for the queue.
@@ -102,7 +107,7 @@ impl DeviceSubmanifold {
                     client,
                     count,
                     dim,
-                    BufferArg::from_raw_parts(coords_handle, 4 * rows),
+                    BufferArg::from_raw_parts(coords_handle.clone(), 4 * rows),
                     BufferArg::from_raw_parts(slots, capacity),
                     BufferArg::from_raw_parts(offsets_handle, 3 * volume),
                     BufferArg::from_raw_parts(forward.clone(), rows * volume),
@@ -186,7 +191,7 @@ impl DeviceSubmanifold {
 
 /// `values[i] = value` for `i < len`.
 #[cube(launch_unchecked)]
-fn fill_kernel(values: &mut [u32], len: usize, value: u32) {
+pub(crate) fn fill_kernel(values: &mut [u32], len: usize, value: u32) {
     if ABSOLUTE_POS >= len {
         terminate!();
     }
@@ -195,7 +200,7 @@ fn fill_kernel(values: &mut [u32], len: usize, value: u32) {
 
 /// A slot for coordinate `(b, x, y, z)`, before masking: a multiplicative mix of the four.
 #[cube]
-fn slot_of(b: i32, x: i32, y: i32, z: i32) -> u32 {
+pub(crate) fn slot_of(b: i32, x: i32, y: i32, z: i32) -> u32 {
     let mut h = u32::cast_from(b) * 0x9E37_79B1u32;
     h = (h ^ u32::cast_from(x)) * 0x85EB_CA77u32;
     h = (h ^ u32::cast_from(y)) * 0xC2B2_AE3Du32;
@@ -375,7 +380,7 @@ fn pair_scatter_kernel(
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
-    use crate::geometry::coords::CoordIndex;
+    use crate::geometry::coords::{Coord, CoordIndex};
     use crate::geometry::kernel_map::KernelMap;
 
     pub(crate) fn client() -> Option<Client> {
@@ -426,7 +431,8 @@ pub(crate) mod tests {
         for (n, stride, kernel) in [(0, 1, 3), (1, 1, 3), (900, 1, 3), (2500, 2, 3), (700, 4, 5), (3000, 1, 1), (12000, 1, 3), (5000, 2, 5)] {
             let coords = scene(n, stride, n as u64 + 1);
             let host = KernelMap::submanifold(&coords, &CoordIndex::build(&coords).unwrap(), kernel, stride);
-            let device = DeviceSubmanifold::build(&client, &coords, kernel, stride);
+            let flat: Vec<i32> = coords.iter().flatten().copied().collect();
+            let device = DeviceMap::submanifold(&client, &upload(&client, &flat), coords.len(), kernel, stride);
             let (rows, volume) = (coords.len(), host.volume());
             let what = format!("{rows} rows, stride {stride}, kernel {kernel}");
             assert_eq!(read_u32(&client, &device.forward, rows * volume), host.out_table().as_slice(), "forward table, {what}");

@@ -2,11 +2,13 @@
 
 use std::fmt;
 use std::any::Any;
-use std::sync::{Arc, Mutex, OnceLock};
+use std::sync::{Arc, OnceLock};
 
 use rayon::prelude::*;
 
+use crate::geometry::attachments::Attachments;
 use crate::geometry::coords::{Coord, CoordError, CoordIndex, pack};
+use crate::geometry::level::LevelCoords;
 use crate::parallel::SyncPtr;
 
 /// Marks "no row" in a [`NeighborTable`].
@@ -88,18 +90,29 @@ pub struct KernelMap {
     n_in: usize,
     n_out: usize,
     volume: usize,
-    /// Built with the map, except for a [`KernelMap::submanifold_deferred`] map: on first host use.
+    /// Built with the map, except for a deferred map: on first host use.
     out_table: OnceLock<Arc<NeighborTable>>,
-    /// The coordinates and tensor stride a deferred submanifold map is built from.
-    source: Option<(Arc<[Coord]>, i32)>,
+    /// What a deferred map's tables are made from (on a device, or on the host if it asks).
+    deferred: Option<Deferred>,
     /// Built with the map for down maps; for submanifold maps it is the mirror of `out_table`,
     /// made only if something asks (the kernels run on `pairs`).
     in_table: OnceLock<Arc<NeighborTable>>,
     pairs: OnceLock<OffsetPairs>,
     pairs_by_input: OnceLock<OffsetPairs>,
-    /// What a backend derives from the map and keeps with it (e.g. the tables uploaded to a GPU),
-    /// freed with the map.
-    attachments: Mutex<Vec<Arc<dyn Any + Send + Sync>>>,
+    /// What a backend derives from the map and keeps with it (e.g. the tables uploaded to a GPU).
+    attachments: Attachments,
+}
+
+/// Where a deferred map's tables come from (a GPU backend makes the down-sampling ones).
+#[cfg_attr(not(feature = "cube"), allow(dead_code))]
+pub(crate) enum Deferred {
+    /// The submanifold map over a level at a tensor stride: built from its coordinates.
+    Submanifold { level: Arc<LevelCoords>, stride: i32 },
+    /// A down-sampling map from a level at a tensor stride, built on a device with the coarse
+    /// level (its device tables attached to it).
+    Down { fine: Arc<LevelCoords>, stride: i32 },
+    /// The transposed map of a deferred down-sampling map: its tables swapped.
+    Up { down: Arc<KernelMap> },
 }
 
 impl fmt::Debug for KernelMap {
@@ -143,17 +156,37 @@ impl KernelMap {
 
     fn out_table_arc(&self) -> &Arc<NeighborTable> {
         self.out_table.get_or_init(|| {
-            let (coords, stride) = self.source.as_ref().expect("a map without a source has its table");
-            let MapKind::Submanifold { kernel } = self.kind else { unreachable!("only submanifold maps are deferred") };
-            let index = CoordIndex::build(coords).expect("a sparse tensor's coordinates are valid");
-            KernelMap::submanifold(coords, &index, kernel, *stride).out_table_arc().clone()
+            let (out_table, in_table) = self.host_tables();
+            if let Some(in_table) = in_table {
+                let _ = self.in_table.set(in_table);
+            }
+            out_table
         })
     }
 
-    /// The coordinates and tensor stride of a [`KernelMap::submanifold_deferred`] map, from which a
-    /// GPU backend builds its own tables.
-    pub fn deferred_source(&self) -> Option<(&Arc<[Coord]>, i32)> {
-        self.source.as_ref().map(|(coords, stride)| (coords, *stride))
+    /// A deferred map's tables built on the host: the output side's, and the input side's where it
+    /// is not the mirror of the output side's.
+    fn host_tables(&self) -> (Arc<NeighborTable>, Option<Arc<NeighborTable>>) {
+        let built = "coordinates of a sparse tensor are validated and on their level's grid";
+        match (self.deferred.as_ref().expect("a map that is not deferred has its tables"), self.kind) {
+            (Deferred::Submanifold { level, stride }, MapKind::Submanifold { kernel }) => {
+                let coords = level.host();
+                let index = CoordIndex::build(coords).expect(built);
+                (KernelMap::submanifold(coords, &index, kernel, *stride).out_table_arc().clone(), None)
+            }
+            (Deferred::Down { fine, stride }, MapKind::Down { kernel }) => {
+                let (map, _) = KernelMap::down(fine.host(), kernel, *stride).expect(built);
+                (map.out_table_arc().clone(), Some(map.in_table_arc().clone()))
+            }
+            (Deferred::Up { down }, _) => (down.in_table_arc().clone(), Some(down.out_table_arc().clone())),
+            (_, kind) => unreachable!("a deferred map of kind {kind:?} from another kind's source"),
+        }
+    }
+
+    /// What a deferred map's tables are made from, for a GPU backend to build its own.
+    #[cfg_attr(not(feature = "cube"), allow(dead_code))]
+    pub(crate) fn deferred(&self) -> Option<&Deferred> {
+        self.deferred.as_ref()
     }
 
     /// Whether the host tables exist (always, except for a deferred map nothing on the host has
@@ -168,7 +201,9 @@ impl KernelMap {
     }
 
     fn in_table_arc(&self) -> &Arc<NeighborTable> {
-        self.in_table.get_or_init(|| Arc::new(mirror(self.out_table_arc())))
+        // A deferred down or up map's input side is set with its output side.
+        let out_table = self.out_table_arc();
+        self.in_table.get_or_init(|| Arc::new(mirror(out_table)))
     }
 
     /// The offset whose pairs are `(r, r)` for every row (the submanifold centre), if any.
@@ -218,13 +253,27 @@ impl KernelMap {
     /// Backends keep derived forms of the map here (device copies of its tables) so that every
     /// layer sharing the map shares them too.
     pub fn attachment<T: Any + Send + Sync>(&self, matches: impl Fn(&T) -> bool, make: impl FnOnce() -> T) -> Arc<T> {
-        let mut attachments = self.attachments.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
-        let found = attachments.iter().find_map(|a| a.clone().downcast::<T>().ok().filter(|t| matches(t)));
-        found.unwrap_or_else(|| {
-            let made = Arc::new(make());
-            attachments.push(made.clone());
-            made
-        })
+        self.attachments.get_or_make(matches, make)
+    }
+
+    /// The transposed map of a shared `map`: a deferred down-sampling map's stays deferred (a GPU
+    /// reuses its device tables, swapped); any other is [`KernelMap::transposed`].
+    pub fn transpose_of(map: &Arc<KernelMap>) -> KernelMap {
+        match (&map.deferred, map.kind) {
+            (Some(Deferred::Down { .. }), MapKind::Down { kernel }) => KernelMap {
+                kind: MapKind::Up { kernel },
+                n_in: map.n_out,
+                n_out: map.n_in,
+                volume: map.volume,
+                out_table: OnceLock::new(),
+                deferred: Some(Deferred::Up { down: map.clone() }),
+                in_table: OnceLock::new(),
+                pairs: OnceLock::new(),
+                pairs_by_input: OnceLock::new(),
+                attachments: Attachments::default(),
+            },
+            _ => map.transposed(),
+        }
     }
 
     /// The same rulebook read backwards: inputs become outputs, offsets keep their index.
@@ -240,11 +289,11 @@ impl KernelMap {
             n_out: self.n_in,
             volume: self.volume,
             out_table: OnceLock::from(self.in_table_arc().clone()),
-            source: None,
+            deferred: None,
             in_table: OnceLock::from(self.out_table_arc().clone()),
             pairs: OnceLock::new(),
             pairs_by_input: OnceLock::new(),
-            attachments: Mutex::default(),
+            attachments: Attachments::default(),
         }
     }
 
@@ -304,11 +353,11 @@ impl KernelMap {
             n_out: n,
             volume,
             out_table: OnceLock::from(Arc::new(table)),
-            source: None,
+            deferred: None,
             in_table: OnceLock::new(),
             pairs: OnceLock::new(),
             pairs_by_input: OnceLock::new(),
-            attachments: Mutex::default(),
+            attachments: Attachments::default(),
         }
     }
 
@@ -316,20 +365,41 @@ impl KernelMap {
     /// them on the device from `coords` (`crate::geometry::device_maps`), the host only where
     /// something on the host reads them. What a GPU's forward pass makes of each level, so that
     /// the host never hashes or probes the level's voxels.
-    pub fn submanifold_deferred(coords: Arc<[Coord]>, kernel: usize, stride: i32) -> KernelMap {
+    pub fn submanifold_deferred(level: Arc<LevelCoords>, kernel: usize, stride: i32) -> KernelMap {
         assert!(kernel % 2 == 1, "submanifold kernel size must be odd, got {kernel}");
-        let n = coords.len();
+        let n = level.len();
         KernelMap {
             kind: MapKind::Submanifold { kernel },
             n_in: n,
             n_out: n,
             volume: kernel.pow(3),
             out_table: OnceLock::new(),
-            source: Some((coords, stride)),
+            deferred: Some(Deferred::Submanifold { level, stride }),
             in_table: OnceLock::new(),
             pairs: OnceLock::new(),
             pairs_by_input: OnceLock::new(),
-            attachments: Mutex::default(),
+            attachments: Attachments::default(),
+        }
+    }
+
+    /// The down-sampling map of [`KernelMap::down`] from `fine` (tensor stride `stride`) to a level
+    /// of `n_out` voxels, whose tables a GPU backend built and keeps in `device_tables` (the host
+    /// builds its own from `fine` only where something on the host reads them).
+    #[cfg_attr(not(feature = "cube"), allow(dead_code))]
+    pub(crate) fn down_deferred<T: Any + Send + Sync>(fine: Arc<LevelCoords>, kernel: usize, stride: i32, n_out: usize, device_tables: Arc<T>) -> KernelMap {
+        let attachments = Attachments::default();
+        attachments.insert(device_tables);
+        KernelMap {
+            kind: MapKind::Down { kernel },
+            n_in: fine.len(),
+            n_out,
+            volume: kernel.pow(3),
+            out_table: OnceLock::new(),
+            deferred: Some(Deferred::Down { fine, stride }),
+            in_table: OnceLock::new(),
+            pairs: OnceLock::new(),
+            pairs_by_input: OnceLock::new(),
+            attachments,
         }
     }
 
@@ -377,11 +447,11 @@ impl KernelMap {
             n_out: out_coords.len(),
             volume,
             out_table: OnceLock::from(Arc::new(out_table)),
-            source: None,
+            deferred: None,
             in_table: OnceLock::from(Arc::new(in_table)),
             pairs: OnceLock::new(),
             pairs_by_input: OnceLock::new(),
-            attachments: Mutex::default(),
+            attachments: Attachments::default(),
         };
         Ok((map, out_coords))
     }
@@ -485,7 +555,7 @@ mod tests {
     fn a_deferred_map_builds_the_same_tables_on_first_host_use() {
         let coords: Vec<Coord> = vec![[0, 0, 0, 0], [0, 2, 0, 0], [0, 2, 2, 2], [1, 0, 0, 2], [0, -2, -2, -2], [0, 10, 10, 10]];
         let eager = KernelMap::submanifold(&coords, &CoordIndex::build(&coords).unwrap(), 3, 2);
-        let deferred = KernelMap::submanifold_deferred(coords.clone().into(), 3, 2);
+        let deferred = KernelMap::submanifold_deferred(Arc::new(LevelCoords::on_host(coords.clone().into())), 3, 2);
         assert_eq!((deferred.n_in(), deferred.n_out(), deferred.volume()), (6, 6, 27));
         assert!(!deferred.has_host_tables());
         assert_eq!(format!("{deferred:?}"), "KernelMap { kind: Submanifold { kernel: 3 }, n_in: 6, n_out: 6, pairs: None }");

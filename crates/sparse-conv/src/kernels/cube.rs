@@ -36,9 +36,12 @@ use burn_cubecl::kernel::into_contiguous;
 use burn_cubecl::tensor::CubeTensor;
 use burn_cubecl::{CubeBackend, CubeDevice};
 
-use crate::geometry::device_maps::{DevicePairs, DeviceSubmanifold};
+use crate::geometry::coords::Coord;
+use crate::geometry::device_down::DeviceDown;
+use crate::geometry::device_maps::{DeviceMap, DevicePairs};
 use crate::geometry::device_tiles::{DeviceRowTiles, MAX_VOLUME as MAX_PLAN_VOLUME};
-use crate::geometry::kernel_map::{KernelMap, NeighborTable};
+use crate::geometry::kernel_map::{Deferred, KernelMap, MapKind, NeighborTable};
+use crate::geometry::level::LevelCoords;
 use crate::geometry::row_tiles::RowTiles;
 use crate::profile::{Kernel, in_kernel};
 
@@ -455,17 +458,39 @@ struct DeviceTables {
     backward: OnceLock<GatherTables>,
     /// `start`, `input`, `output` of [`crate::geometry::kernel_map::OffsetPairs`].
     pairs: OnceLock<[Handle; 3]>,
-    /// A deferred submanifold map's tables and pairs, built on the device.
-    built: OnceLock<DeviceSubmanifold>,
+    /// A deferred map's tables and pairs, built on the device.
+    built: OnceLock<DeviceMap>,
     built_pairs: OnceLock<DevicePairs>,
 }
 
 impl DeviceTables {
-    /// A deferred map's tables, built here from its coordinates the first time.
-    fn built(&self, map: &KernelMap, client: &Client) -> Option<&DeviceSubmanifold> {
-        let (coords, stride) = map.deferred_source()?;
-        let crate::MapKind::Submanifold { kernel } = map.kind() else { return None };
-        Some(self.built.get_or_init(|| in_kernel(Kernel::MapBuild, || DeviceSubmanifold::build(client, coords, kernel, stride))))
+    fn new(device: &CubeDevice, built: Option<DeviceMap>) -> Self {
+        Self {
+            device: device.clone(),
+            forward: OnceLock::new(),
+            backward: OnceLock::new(),
+            pairs: OnceLock::new(),
+            built: built.map(OnceLock::from).unwrap_or_default(),
+            built_pairs: OnceLock::new(),
+        }
+    }
+
+    /// A deferred map's tables on the device: a submanifold map's built here from its level's
+    /// coordinates the first time, a down-sampling map's made with it (on this device, or none:
+    /// the host's are uploaded), a transposed one's its down-sampling map's swapped.
+    fn built(&self, map: &KernelMap, client: &Client) -> Option<&DeviceMap> {
+        if let Some(built) = self.built.get() {
+            return Some(built);
+        }
+        let made = match (map.deferred()?, map.kind()) {
+            (Deferred::Submanifold { level, stride }, MapKind::Submanifold { kernel }) => {
+                let coords = device_coords(level, &self.device, client);
+                in_kernel(Kernel::MapBuild, || DeviceMap::submanifold(client, &coords.handle, level.len(), kernel, *stride))
+            }
+            (Deferred::Up { down }, _) => tables(down, &self.device).built(down, client)?.transposed(map.n_out()),
+            _ => return None,
+        };
+        Some(self.built.get_or_init(|| made))
     }
 
     /// The forward's (`backward` false) or the feature gradient's gather table.
@@ -479,17 +504,50 @@ impl DeviceTables {
 }
 
 fn tables(map: &KernelMap, device: &CubeDevice) -> Arc<DeviceTables> {
-    map.attachment(
-        |t: &DeviceTables| &t.device == device,
-        || DeviceTables {
-            device: device.clone(),
-            forward: OnceLock::new(),
-            backward: OnceLock::new(),
-            pairs: OnceLock::new(),
-            built: OnceLock::new(),
-            built_pairs: OnceLock::new(),
+    map.attachment(|t: &DeviceTables| &t.device == device, || DeviceTables::new(device, None))
+}
+
+/// A level's coordinates on one device, `[len, 4]` `i32`.
+struct DeviceCoords {
+    device: CubeDevice,
+    handle: Handle,
+}
+
+/// `level`'s coordinates on `device`: where it was made there, or uploaded once.
+fn device_coords(level: &LevelCoords, device: &CubeDevice, client: &Client) -> Arc<DeviceCoords> {
+    level.attachment(
+        |c: &DeviceCoords| &c.device == device,
+        || {
+            let flat: Vec<i32> = level.host().iter().flatten().copied().collect();
+            DeviceCoords { device: device.clone(), handle: in_kernel(Kernel::Upload, || upload(client, &flat)) }
         },
     )
+}
+
+/// The down-sampling map of `kernel` from `level` (tensor `stride`) and the coarse level, made on
+/// `device` if it is a CubeCL one; the coarse coordinates stay there until the host reads them.
+pub(crate) fn down_on_device(device: &burn::tensor::Device, level: &Arc<LevelCoords>, kernel: usize, stride: i32) -> Option<(KernelMap, Arc<LevelCoords>)> {
+    let inner = device.clone().inner();
+    let burn::backend::DispatchDevice::Cube(device) = inner.as_dispatch() else { return None };
+    let device = device.clone();
+    if level.is_empty() {
+        return None;
+    }
+    let client = device.client();
+    let coords = device_coords(level, &device, &client);
+    let down = DeviceDown::build(&client, &coords.handle, level.len(), kernel, stride);
+    let coarse_handle = down.coarse_coords.clone();
+    let coarse = down.coarse;
+    let read_back = {
+        let (client, handle) = (client.clone(), coarse_handle.clone());
+        move || -> Vec<Coord> {
+            let bytes = client.read_one(handle.clone()).expect("reading a level's coordinates back");
+            i32::from_bytes(&bytes)[..4 * coarse].chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]).collect()
+        }
+    };
+    let coarse_level = LevelCoords::on_device(coarse, Arc::new(DeviceCoords { device: device.clone(), handle: coarse_handle }), read_back);
+    let map = KernelMap::down_deferred(level.clone(), kernel, stride, coarse, Arc::new(DeviceTables::new(&device, Some(down.map))));
+    Some((map, Arc::new(coarse_level)))
 }
 
 /// `values` on the device; one zero for none (wgpu cannot bind an empty buffer).

@@ -298,8 +298,8 @@ pub fn backends_agree_on_random_cases() {
     let dense_coords = random_coords(&mut r, 6000, 1, 12, 1);
     let dense = Arc::new(KernelMap::submanifold(&dense_coords, &CoordIndex::build(&dense_coords).unwrap(), 3, 1));
     // Deferred maps: on a GPU built there (`geometry::device_maps`), on the CPU on first use.
-    let deferred = Arc::new(KernelMap::submanifold_deferred(coords.clone().into(), 3, 1));
-    let dense_deferred = Arc::new(KernelMap::submanifold_deferred(dense_coords.clone().into(), 3, 1));
+    let deferred = Arc::new(KernelMap::submanifold_deferred(Arc::new(sparse_conv::LevelCoords::on_host(coords.clone().into())), 3, 1));
+    let dense_deferred = Arc::new(KernelMap::submanifold_deferred(Arc::new(sparse_conv::LevelCoords::on_host(dense_coords.clone().into())), 3, 1));
     let cases = [("deferred submanifold", &deferred, [8, 16]), ("dense deferred submanifold", &dense_deferred, [72, 136]), ("submanifold", &subm, [8, 16]), ("down", &down, [8, 16]), ("up", &up, [8, 16]), ("submanifold", &subm, [72, 136]), ("up", &up, [136, 72]), ("submanifold", &subm, [6, 10]), ("dense submanifold", &dense, [8, 16]), ("dense submanifold", &dense, [72, 136]), ("dense submanifold", &dense, [136, 72])];
     for (name, map, c) in cases {
         let x = random_values(&mut r, map.n_in() * c[0]);

@@ -1,0 +1,75 @@
+//! One level's voxel coordinates, on the host or on a GPU, copied to the other side only when
+//! something there reads them: a GPU's forward pass down-samples its levels on the device and the
+//! host never needs their coordinates.
+
+use std::any::Any;
+use std::fmt;
+use std::sync::{Arc, OnceLock};
+
+use crate::geometry::attachments::Attachments;
+use crate::geometry::coords::Coord;
+
+/// Reads a device level's coordinates back to the host.
+type ReadBack = Box<dyn Fn() -> Vec<Coord> + Send + Sync>;
+
+/// The voxel coordinates of one level of a sparse network.
+pub struct LevelCoords {
+    len: usize,
+    host: OnceLock<Arc<[Coord]>>,
+    /// How to fetch the coordinates of a level made on a device.
+    read_back: Option<ReadBack>,
+    /// The coordinates on devices (uploaded, or where the level was made).
+    attachments: Attachments,
+}
+
+impl fmt::Debug for LevelCoords {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("LevelCoords").field("len", &self.len).field("on_host", &self.host.get().is_some()).finish()
+    }
+}
+
+impl LevelCoords {
+    /// A level whose coordinates are on the host.
+    pub fn on_host(coords: Arc<[Coord]>) -> Self {
+        Self { len: coords.len(), host: OnceLock::from(coords), read_back: None, attachments: Attachments::default() }
+    }
+
+    /// A level made on a device: `on_device` holds its `len` coordinates there, `read_back`
+    /// fetches them the first time the host asks.
+    #[cfg_attr(not(feature = "cube"), allow(dead_code))]
+    pub(crate) fn on_device<T: Any + Send + Sync>(len: usize, on_device: Arc<T>, read_back: impl Fn() -> Vec<Coord> + Send + Sync + 'static) -> Self {
+        let attachments = Attachments::default();
+        attachments.insert(on_device);
+        Self { len, host: OnceLock::new(), read_back: Some(Box::new(read_back)), attachments }
+    }
+
+    /// Number of voxels.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    /// Whether the level has no voxels.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// The coordinates on the host (read back from the device the first time for a device level).
+    pub fn host(&self) -> &Arc<[Coord]> {
+        self.host.get_or_init(|| {
+            let read_back = self.read_back.as_ref().expect("a level without host coordinates was made on a device");
+            read_back().into()
+        })
+    }
+
+    /// Whether the coordinates are on the host (always, except for a device level nothing on the
+    /// host has read).
+    pub fn is_on_host(&self) -> bool {
+        self.host.get().is_some()
+    }
+
+    /// The level's form of type `T` that `matches` (its coordinates on one device), made with
+    /// `make` the first time.
+    pub fn attachment<T: Any + Send + Sync>(&self, matches: impl Fn(&T) -> bool, make: impl FnOnce() -> T) -> Arc<T> {
+        self.attachments.get_or_make(matches, make)
+    }
+}
