@@ -66,3 +66,24 @@ fn centerpoint_matches_flex() {
     let cfg = CenterPointConfig { x_range: [-3.2, 3.2], y_range: [-3.2, 3.2], layer_nums: vec![1, 1, 1], width: 0.25, ..Default::default() };
     check(|d| cfg.init(d), &batch, "CenterPoint");
 }
+
+/// On wgpu Person-MinkUNet's coarse levels stay on the device through a forward and backward
+/// pass: nothing in the U-Net reads their coordinates back.
+#[test]
+fn person_minkunet_keeps_its_coarse_levels_on_a_gpu() {
+    if !std::env::var("PMUNET_TEST_WGPU").is_ok_and(|v| v == "1") {
+        return;
+    }
+    let batch = sim_batch("backends-pmu-levels", 1, 6, 4.0, 2);
+    let cfg = PersonMinkUNetConfig { width: 0.25, ..Default::default() };
+    let device = wgpu_device().autodiff();
+    let model = cfg.init(&device);
+    let input = model::PersonMinkUNet::input(&batch, cfg.input, &device);
+    let levels = model.backbone.forward_levels(input);
+    let out = levels.up.last().expect("the U-Net has up stages").features();
+    let _ = (out.clone() * out).sum().backward();
+    assert!(levels.down.len() > 2, "the U-Net has coarse levels");
+    for (i, level) in levels.down.iter().enumerate().skip(1) {
+        assert!(!level.level().is_on_host(), "down level {i}'s coordinates came to the host");
+    }
+}

@@ -156,6 +156,20 @@ impl SparseTensor {
         }
     }
 
+    /// Makes the down-sampling maps and coordinates of the coarser levels now, one level per
+    /// kernel size in `kernels`. On a GPU each coarse level's voxel count is read back, which
+    /// waits for everything queued on the device: a forward pass that asks before it queues its
+    /// first convolution waits for its input's upload only, not for its own layers. The maps are
+    /// those [`SparseTensor::down_map`] returns later from the cache.
+    pub fn prepare_down_levels(&self, kernels: impl IntoIterator<Item = usize>) {
+        let (mut level, mut stride) = (self.level.clone(), self.stride);
+        for kernel in kernels {
+            // `features` stands for the device only; its rows are the finest level's.
+            let at = Self { features: self.features.clone(), level, stride, cache: self.cache.clone() };
+            (level, stride) = (at.down_map(kernel).1, stride * kernel as i32);
+        }
+    }
+
     /// The transposed map back to the finer level this one was down-sampled from with `kernel`,
     /// and that level's coordinates.
     ///
