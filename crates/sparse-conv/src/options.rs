@@ -42,14 +42,15 @@ impl CpuKernels {
     }
 }
 
-/// Where a tensor on a GPU gets its submanifold maps' tables.
+/// Where a tensor on a GPU gets its coarse levels, its maps' tables and its tile plans.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "snake_case")]
 pub enum GpuMaps {
-    /// Built on the device from the level's coordinates (`geometry::device_maps`).
+    /// Made on the device from the level's coordinates (`geometry::device_maps`, `device_down`,
+    /// `device_tiles`): nothing but one voxel count per level comes back to the host.
     #[default]
     Device,
-    /// Built on the host and uploaded, as the CPU backends build them (to compare the two).
+    /// Made on the host and uploaded, as the CPU backends make them (to compare the two).
     Host,
 }
 
@@ -63,12 +64,12 @@ pub struct KernelOptions {
     #[arg(long = "cpu-kernels", value_enum, default_value_t = CpuKernels::Auto)]
     pub cpu: CpuKernels,
     /// Fewest tiles (cubes) a GPU gather launch needs to run tiled (rows sorted by the offsets
-    /// they use, staged in shared memory); smaller launches run untiled, which needs no
-    /// host-side tile plan. 0: always tiled. The default, 2048, is where the tiled kernel repaid
+    /// they use, staged in shared memory); smaller launches run untiled, which needs no tile
+    /// plan. 0: always tiled. The default, 2048, is where the tiled kernel repaid
     /// its plan on an H100 (`crates/sparse-conv/README.md`).
     #[arg(long, default_value_t = DEFAULT_TILED_MIN_CUBES)]
     pub gpu_tiled_min_cubes: usize,
-    /// Where a GPU tensor's submanifold maps are built: `device` or `host`.
+    /// Where a GPU tensor's levels, maps and tile plans are made: `device` or `host`.
     #[arg(long, value_enum, default_value_t = GpuMaps::Device)]
     pub gpu_maps: GpuMaps,
 }
