@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # Where a full-width Person-MinkUNet's step goes on a GPU, for wgpu and CUDA in one run (issue 48's
 # yardstick): the batch-2 training step and one-frame inference on the standard scene with the
-# host's parts of the op (kernel maps, tile plans, uploads, dispatch), with submanifold maps built
-# on the host (`--gpu-maps host`, the path before) and on the device, the batch-16 step's frames
+# host's parts of the op (kernel maps, tile plans, uploads, dispatch), with the levels, maps and
+# tile plans made on the host (`--gpu-maps host`, the path before) and on the device, the batch-16 step's frames
 # per second against batch 2's, then one profiled batch-2 step whose kernels CubeCL times one by
 # one (each synchronised, so that run is slower; it gives the device time by kernel family, and
 # against the unprofiled step how busy the GPU is).
@@ -31,11 +31,12 @@ trap 'rm -rf "$dir"' EXIT
 for backend in $backends; do
     echo "== $backend"
     "$bench" --backend "$backend" --coords "$scene" --batch 1 --only infer --runs "$runs" --warmup 3 "${extra[@]}" || continue
-    # Before device maps, for the same run's ratio: submanifold maps built on the host and uploaded.
-    echo "-- submanifold maps built on the host (--gpu-maps host):"
+    # Before device maps, for the same run's ratio: levels, maps and tile plans made on the host
+    # and uploaded.
+    echo "-- maps and plans made on the host (--gpu-maps host):"
     "$bench" --backend "$backend" --coords "$scene" --batch 1 --only infer --runs "$runs" --warmup 3 --gpu-maps host "${extra[@]}"
     "$bench" --backend "$backend" --coords "$scene" --batch 2 --only train --runs "$runs" --warmup 3 --gpu-maps host "${extra[@]}"
-    echo "-- built on the device (the default):"
+    echo "-- made on the device (the default):"
     "$bench" --backend "$backend" --coords "$scene" --batch 2 --only train --runs "$runs" --warmup 3 "${extra[@]}" | tee "$dir/b2.txt"
     "$bench" --backend "$backend" --coords "$scene" --batch "$large" --only train --runs $(( (runs + 1) / 2 )) --warmup 2 "${extra[@]}" | tee "$dir/b16.txt"
     b2=$(grep -o 'training step *[0-9.]*' "$dir/b2.txt" | awk '{print $3}')
@@ -51,6 +52,7 @@ for backend in $backends; do
           family = (name ~ /GatherConv|DirectGather/) ? "op: gather (fwd, feature grad)" \
                  : (name ~ /WeightGrad|SumSlices/) ? "op: weight grad" \
                  : (name ~ /Adam/) ? "Adam" \
+                 : (name ~ /FillKernel|HashInsert|SubmanifoldTable|Pair(Count|Scan|Scatter)|ParentInsert|OwnerCount|NumberKernel|DownTable|RowMask|Digit(Count|Scatter)|Tile(Mask|Offsets)/) ? "op: levels, maps, tile plans" \
                  : (name ~ /[Mm]atmul/) ? "Burn: matmul" : "Burn: the rest (elementwise, reductions, fused)"
           total[family] += v; all += v }
         END { printf "  device time per step by kernel family (%d profiled steps incl. the first, each kernel synchronised):\n", runs
