@@ -68,7 +68,7 @@ fn centerpoint_matches_flex() {
 }
 
 /// On wgpu Person-MinkUNet's coarse levels stay on the device through a forward and backward
-/// pass: nothing in the U-Net reads their coordinates back.
+/// pass: nothing in the U-Net reads their coordinates or sizes back.
 #[test]
 fn person_minkunet_keeps_its_coarse_levels_on_a_gpu() {
     if !std::env::var("PMUNET_TEST_WGPU").is_ok_and(|v| v == "1") {
@@ -79,9 +79,12 @@ fn person_minkunet_keeps_its_coarse_levels_on_a_gpu() {
     let device = wgpu_device().autodiff();
     let model = cfg.init(&device);
     let input = model::PersonMinkUNet::input(&batch, cfg.input, &device);
+    let before = sparse_conv::profile::KernelTimes::now();
     let levels = model.backbone.forward_levels(input);
     let out = levels.up.last().expect("the U-Net has up stages").features();
     let _ = (out.clone() * out).sum().backward();
+    // The host counted every level's voxels: the op read nothing back.
+    assert_eq!(sparse_conv::profile::KernelTimes::now().read_backs, before.read_backs, "the op read from the device");
     assert!(levels.down.len() > 2, "the U-Net has coarse levels");
     for (i, level) in levels.down.iter().enumerate().skip(1) {
         assert!(!level.level().is_on_host(), "down level {i}'s coordinates came to the host");

@@ -39,6 +39,14 @@ pub(crate) fn count_conv_flops(pairs: usize, c_in: usize, c_out: usize) {
     CONV_FLOPS.fetch_add(2 * (pairs * c_in * c_out) as u64, Ordering::Relaxed);
 }
 
+/// Times the op's GPU path read something back from the device (each waits for what is queued).
+static READ_BACKS: AtomicU64 = AtomicU64::new(0);
+
+/// Counts one read-back of the op's GPU path (a level's voxel count or coordinates).
+pub(crate) fn count_read_back() {
+    READ_BACKS.fetch_add(1, Ordering::Relaxed);
+}
+
 /// Runs `f`, adding its wall time to `kernel`'s process-wide total. The CPU backends wrap their
 /// kernels in it, so the benchmarks can print what the rest of a step (Burn's graph, its
 /// elementwise ops, the optimiser) costs beside them. On a GPU backend it counts the host's parts
@@ -73,6 +81,8 @@ pub struct KernelTimes {
     pub gpu_dispatch_ms: f64,
     /// Operations of the three convolution kernels, in GFLOP (2 per multiply-add).
     pub conv_gflop: f64,
+    /// Read-backs from the device on the op's GPU path (none when the host counted every level).
+    pub read_backs: f64,
 }
 
 impl KernelTimes {
@@ -89,6 +99,7 @@ impl KernelTimes {
             upload_ms: ms(Kernel::Upload),
             gpu_dispatch_ms: ms(Kernel::GpuDispatch),
             conv_gflop: CONV_FLOPS.load(Ordering::Relaxed) as f64 / 1e9,
+            read_backs: READ_BACKS.load(Ordering::Relaxed) as f64,
         }
     }
 
@@ -105,6 +116,7 @@ impl KernelTimes {
             upload_ms: d(self.upload_ms, earlier.upload_ms),
             gpu_dispatch_ms: d(self.gpu_dispatch_ms, earlier.gpu_dispatch_ms),
             conv_gflop: d(self.conv_gflop, earlier.conv_gflop),
+            read_backs: d(self.read_backs, earlier.read_backs),
         }
     }
 

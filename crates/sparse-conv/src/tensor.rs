@@ -8,7 +8,7 @@ use burn::tensor::Tensor;
 use crate::profile::{Kernel, in_kernel};
 use crate::geometry::coords::{Coord, CoordError, CoordIndex};
 use crate::geometry::kernel_map::{KernelMap, MapKind};
-use crate::geometry::level::LevelCoords;
+use crate::geometry::level::{LevelCoords, coarse_level_sizes};
 
 /// Features `[N, C]` on the voxels `coords` of one level of a sparse network.
 ///
@@ -131,7 +131,7 @@ impl SparseTensor {
         if let Some(map) = self.cache.get(key) {
             return (map, self.cache.level(out_stride).expect("a cached down map has its level"));
         }
-        let (map, level) = in_kernel(Kernel::MapBuild, || self.down_on_device(kernel)).unwrap_or_else(|| {
+        let (map, level) = self.down_on_device(kernel).unwrap_or_else(|| {
             let (map, coords) = in_kernel(Kernel::MapBuild, || KernelMap::down(self.coords(), kernel, self.stride))
                 .expect("coordinates of a sparse tensor are validated and on their level's grid");
             (map, Arc::new(LevelCoords::on_host(coords.into())))
@@ -148,7 +148,10 @@ impl SparseTensor {
             return None;
         }
         #[cfg(feature = "cube")]
-        return crate::kernels::cube::down_on_device(&self.features.device(), &self.level, kernel, self.stride);
+        {
+            let coarse = self.cache.state.lock().unwrap().level_sizes.get(&(self.stride * kernel as i32)).copied();
+            crate::kernels::cube::down_on_device(&self.features.device(), &self.level, kernel, self.stride, coarse)
+        }
         #[cfg(not(feature = "cube"))]
         {
             let _ = kernel;
@@ -157,11 +160,21 @@ impl SparseTensor {
     }
 
     /// Makes the down-sampling maps and coordinates of the coarser levels now, one level per
-    /// kernel size in `kernels`. On a GPU each coarse level's voxel count is read back, which
-    /// waits for everything queued on the device: a forward pass that asks before it queues its
-    /// first convolution waits for its input's upload only, not for its own layers. The maps are
-    /// those [`SparseTensor::down_map`] returns later from the cache.
+    /// kernel size in `kernels`; later [`SparseTensor::down_map`]s find them in the cache. On a
+    /// GPU the levels' voxel counts (tensor shapes) are counted on the host first, from this
+    /// level's coordinates, so the device makes the maps without reading anything back; a
+    /// `down_map` without this reads the count back, which waits for everything queued.
     pub fn prepare_down_levels(&self, kernels: impl IntoIterator<Item = usize>) {
+        let kernels: Vec<usize> = kernels.into_iter().collect();
+        if maps_on_device(&self.features) && self.level.is_on_host() {
+            let sizes = in_kernel(Kernel::MapBuild, || coarse_level_sizes(self.coords(), self.stride, &kernels));
+            let mut state = self.cache.state.lock().unwrap();
+            let mut stride = self.stride;
+            for (kernel, size) in kernels.iter().zip(sizes) {
+                stride *= *kernel as i32;
+                state.level_sizes.insert(stride, size);
+            }
+        }
         let (mut level, mut stride) = (self.level.clone(), self.stride);
         for kernel in kernels {
             // `features` stands for the device only; its rows are the finest level's.
@@ -236,6 +249,8 @@ struct CacheState {
     levels: HashMap<i32, Arc<LevelCoords>>,
     indexes: HashMap<i32, Arc<CoordIndex>>,
     maps: HashMap<(MapKind, i32), Arc<KernelMap>>,
+    /// Voxel counts of coarser levels known on the host before they are made, by tensor stride.
+    level_sizes: HashMap<i32, usize>,
 }
 
 impl MapCache {

@@ -123,8 +123,8 @@ fn print_kernels(k: Option<KernelTimes>, mean_wall_ms: Option<f64>) {
     );
     if k.gpu_host_ms() > 0.0 {
         println!(
-            "    the op's host work on the GPU path: tile plans {:.1} ms, uploads {:.1} ms, dispatch {:.1} ms (in the {:.1} ms above)",
-            k.tile_plan_ms, k.upload_ms, k.gpu_dispatch_ms, k.total_ms()
+            "    the op's host work on the GPU path: tile plans {:.1} ms, uploads {:.1} ms, dispatch {:.1} ms (in the {:.1} ms above); {:.1} read-backs from the device",
+            k.tile_plan_ms, k.upload_ms, k.gpu_dispatch_ms, k.total_ms(), k.read_backs
         );
     } else if k.conv_gflop > 0.0 {
         println!("    conv kernels: {:.1} GFLOP at {:.1} GFLOP/s", k.conv_gflop, k.conv_gflops());

@@ -1,6 +1,8 @@
 //! Down-sampling maps built on a GPU from a level's coordinates there, with the coarser level's
-//! coordinates, so a forward pass keeps every level on the device. One number comes back to the
-//! host per level: the coarse level's voxel count, a tensor shape.
+//! coordinates, so a forward pass keeps every level on the device. The host needs one number per
+//! level, the coarse level's voxel count (a tensor shape): the caller gives it (counted on the
+//! host before the pass, `level::coarse_level_sizes`) or it is read back, which waits for the
+//! device's queue.
 //!
 //! - each fine row's coarse voxel `floor(c / s')·s'` (`s'` = kernel × stride) and its offset in it;
 //! - a hash of the coarse voxels (the same open addressing as `device_maps`), each slot also
@@ -30,14 +32,15 @@ pub(crate) struct DeviceDown {
     pub map: DeviceMap,
     /// The coarse voxels' coordinates, `[coarse, 4]` `i32`.
     pub coarse_coords: Handle,
-    /// Number of coarse voxels (read back: the one number that comes to the host).
+    /// Number of coarse voxels.
     pub coarse: usize,
 }
 
 impl DeviceDown {
     /// The down-sampling map (kernel = stride = `kernel`) of the `rows` coordinates `coords`
-    /// (`[rows, 4]` `i32` on the device, unique, on the grid of tensor `stride`).
-    pub fn build(client: &Client, coords: &Handle, rows: usize, kernel: usize, stride: i32) -> Self {
+    /// (`[rows, 4]` `i32` on the device, unique, on the grid of tensor `stride`), whose coarse
+    /// level has `coarse` voxels if the caller knows (read back otherwise).
+    pub fn build(client: &Client, coords: &Handle, rows: usize, kernel: usize, stride: i32, coarse: Option<usize>) -> Self {
         assert!(rows > 0, "a device down-sampling map is made for a level with voxels");
         let volume = kernel.pow(3);
         let capacity = (2 * rows).next_power_of_two().max(64);
@@ -106,8 +109,11 @@ impl DeviceDown {
                 SCAN_UNITS,
             );
         }
-        let bytes = client.read_one(total).expect("reading the coarse voxel count back");
-        let coarse = u32::from_bytes(&bytes)[1] as usize;
+        let coarse = coarse.unwrap_or_else(|| {
+            crate::profile::count_read_back();
+            let bytes = client.read_one(total).expect("reading the coarse voxel count back");
+            u32::from_bytes(&bytes)[1] as usize
+        });
         let coarse_coords = client.empty(4 * coarse.max(1) * size_of::<i32>());
         // Safety: unit `b` numbers its block's owners from its first, the scan's count of the
         // owners before the block: distinct owners get distinct numbers below `coarse`.
@@ -338,7 +344,11 @@ mod tests {
             let coords = scene(n, stride, n as u64 + 11);
             let (host, host_coarse) = KernelMap::down(&coords, kernel, stride).unwrap();
             let flat: Vec<i32> = coords.iter().flatten().copied().collect();
-            let device = DeviceDown::build(&client, &upload(&client, &flat), coords.len(), kernel, stride);
+            // Counted on the device (read back), and given as the host counts it.
+            let device = DeviceDown::build(&client, &upload(&client, &flat), coords.len(), kernel, stride, None);
+            let given = DeviceDown::build(&client, &upload(&client, &flat), coords.len(), kernel, stride, Some(host_coarse.len()));
+            let what_given = format!("{} rows, stride {stride}, kernel {kernel}, count given", coords.len());
+            assert_eq!(read_u32(&client, &given.map.forward, given.coarse * host.volume()), host.out_table().as_slice(), "forward table, {what_given}");
             let what = format!("{} rows, stride {stride}, kernel {kernel}", coords.len());
             assert_eq!(device.coarse, host_coarse.len(), "coarse voxels, {what}");
             let bytes = client.read_one(device.coarse_coords.clone()).unwrap();

@@ -73,3 +73,45 @@ impl LevelCoords {
         self.attachments.get_or_make(matches, make)
     }
 }
+
+/// The voxel counts of the coarser levels a chain of down-samplings (kernel = stride, one per
+/// entry of `kernels`) makes from `coords` at tensor stride `stride`: what a GPU's forward pass
+/// needs on the host to shape its tensors, counted here so that nothing is read back from the
+/// device while it runs.
+pub(crate) fn coarse_level_sizes(coords: &[Coord], stride: i32, kernels: &[usize]) -> Vec<usize> {
+    let mut level: Vec<Coord> = coords.to_vec();
+    let mut stride = stride;
+    let mut sizes = Vec::with_capacity(kernels.len());
+    for &kernel in kernels {
+        stride *= kernel as i32;
+        // A coarser floor of a floor is the coarser floor: each level from the one before.
+        for c in &mut level {
+            *c = [c[0], c[1].div_euclid(stride) * stride, c[2].div_euclid(stride) * stride, c[3].div_euclid(stride) * stride];
+        }
+        level.sort_unstable();
+        level.dedup();
+        sizes.push(level.len());
+    }
+    sizes
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::kernel_map::KernelMap;
+
+    #[test]
+    fn coarse_level_sizes_are_the_down_maps_levels() {
+        let coords: Vec<Coord> = (0..5000).map(|i: i32| [i % 3, (i * 7919) % 97 - 48, (i * 104_729) % 61 - 30, (i * 13) % 9 - 4]).collect::<std::collections::BTreeSet<_>>().into_iter().collect();
+        let kernels = [2, 2, 3, 2];
+        let mut expected = Vec::new();
+        let (mut level, mut stride) = (coords.clone(), 1);
+        for &k in &kernels {
+            level = KernelMap::down(&level, k, stride).unwrap().1;
+            stride *= k as i32;
+            expected.push(level.len());
+        }
+        assert_eq!(coarse_level_sizes(&coords, 1, &kernels), expected);
+        assert!(expected.windows(2).all(|w| w[1] < w[0]), "the scene must shrink level by level: {expected:?}");
+    }
+}

@@ -526,7 +526,8 @@ fn device_coords(level: &LevelCoords, device: &CubeDevice, client: &Client) -> A
 
 /// The down-sampling map of `kernel` from `level` (tensor `stride`) and the coarse level, made on
 /// `device` if it is a CubeCL one; the coarse coordinates stay there until the host reads them.
-pub(crate) fn down_on_device(device: &burn::tensor::Device, level: &Arc<LevelCoords>, kernel: usize, stride: i32) -> Option<(KernelMap, Arc<LevelCoords>)> {
+/// `coarse`: the coarse level's voxel count if the host counted it (read back otherwise).
+pub(crate) fn down_on_device(device: &burn::tensor::Device, level: &Arc<LevelCoords>, kernel: usize, stride: i32, coarse: Option<usize>) -> Option<(KernelMap, Arc<LevelCoords>)> {
     let inner = device.clone().inner();
     let burn::backend::DispatchDevice::Cube(device) = inner.as_dispatch() else { return None };
     let device = device.clone();
@@ -535,12 +536,13 @@ pub(crate) fn down_on_device(device: &burn::tensor::Device, level: &Arc<LevelCoo
     }
     let client = device.client();
     let coords = device_coords(level, &device, &client);
-    let down = DeviceDown::build(&client, &coords.handle, level.len(), kernel, stride);
+    let down = in_kernel(Kernel::MapBuild, || DeviceDown::build(&client, &coords.handle, level.len(), kernel, stride, coarse));
     let coarse_handle = down.coarse_coords.clone();
     let coarse = down.coarse;
     let read_back = {
         let (client, handle) = (client.clone(), coarse_handle.clone());
         move || -> Vec<Coord> {
+            crate::profile::count_read_back();
             let bytes = client.read_one(handle.clone()).expect("reading a level's coordinates back");
             i32::from_bytes(&bytes)[..4 * coarse].chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]).collect()
         }
