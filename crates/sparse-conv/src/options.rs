@@ -47,7 +47,7 @@ impl CpuKernels {
 #[serde(rename_all = "snake_case")]
 pub enum GpuMaps {
     /// Made on the device from the level's coordinates (`geometry::device_maps`, `device_down`,
-    /// `device_tiles`): nothing but one voxel count per level comes back to the host.
+    /// `device_tiles`); the levels' sizes are counted on the host, nothing is read back.
     #[default]
     Device,
     /// Made on the host and uploaded, as the CPU backends make them (to compare the two).

@@ -134,7 +134,8 @@ impl MinkUNet {
 
     /// The forward pass keeping every level's output (for checks of the stride bookkeeping).
     pub fn forward_levels(&self, x: SparseTensor) -> UNetLevels {
-        // Every level's map before any layer is queued (on a GPU each level's size is read back).
+        // Every level's map before any layer is queued: on a GPU the levels' sizes are counted on
+        // the host here and their maps queued on the device, nothing read back.
         x.prepare_down_levels(self.down.iter().map(|stage| stage.conv.conv.kernel_size));
         let mut x = x;
         for (conv, norm) in self.stem.iter().zip(&self.stem_norms) {

@@ -130,16 +130,18 @@ impl DeviceDown {
                 BufferArg::from_raw_parts(coarse_coords.clone(), 4 * coarse.max(1)),
                 rows,
                 blocks,
+                coarse,
                 BLOCK_ROWS,
             );
         }
-        let forward = u32_buffer(coarse * volume);
+        let forward = u32_buffer(coarse.max(1) * volume);
         let backward = u32_buffer(rows * volume);
         fill(client, &forward, coarse * volume, NONE);
         fill(client, &backward, rows * volume, NONE);
         // Safety: unit `r < rows` writes entry `(r, k_r)` of the backward table and
-        // `(number, k_r)` of the forward one, `number < coarse`; fine rows are unique, so no two
-        // share a (coarse voxel, offset).
+        // `(number, k_r)` of the forward one where `number < coarse` (always, with the right
+        // count; the guard keeps a wrong one from writing out of bounds); fine rows are unique,
+        // so no two share a (coarse voxel, offset).
         unsafe {
             down_table_kernel::launch_unchecked(
                 client,
@@ -152,6 +154,7 @@ impl DeviceDown {
                 BufferArg::from_raw_parts(backward.clone(), rows * volume),
                 rows,
                 volume,
+                coarse,
             );
         }
         Self { map: DeviceMap { forward, backward, rows: coarse, volume }, coarse_coords, coarse }
@@ -270,7 +273,8 @@ fn owner_count_kernel(slot_of_row: &[u32], owners: &[u32], counts: &mut [u32], r
 }
 
 /// Numbers block `b`'s owners in row order from `firsts[b]`: each owner's slot gets its number
-/// and the number's coarse coordinates are the owner's parent.
+/// and the number's coarse coordinates are the owner's parent (numbers from `coarse` on, which
+/// only a wrong count gives, are not written).
 #[cube(launch_unchecked)]
 #[allow(clippy::too_many_arguments)]
 fn number_kernel(
@@ -282,6 +286,7 @@ fn number_kernel(
     coarse_coords: &mut [i32],
     rows: usize,
     blocks: usize,
+    coarse: usize,
     #[comptime] block_rows: usize,
 ) {
     let b = ABSOLUTE_POS;
@@ -293,7 +298,7 @@ fn number_kernel(
         let r = b * block_rows + j;
         if r < rows {
             let slot = slot_of_row[r] as usize;
-            if owners[slot] == r as u32 {
+            if owners[slot] == r as u32 && at < coarse {
                 number_of_slot[slot] = at as u32;
                 coarse_coords[4 * at] = parents[4 * r];
                 coarse_coords[4 * at + 1] = parents[4 * r + 1];
@@ -316,6 +321,7 @@ fn down_table_kernel(
     backward: &mut [u32],
     rows: usize,
     volume: usize,
+    coarse: usize,
 ) {
     let r = ABSOLUTE_POS;
     if r >= rows {
@@ -323,8 +329,10 @@ fn down_table_kernel(
     }
     let k = offset_of_row[r] as usize;
     let o = number_of_slot[slot_of_row[r] as usize];
-    backward[r * volume + k] = o;
-    forward[o as usize * volume + k] = r as u32;
+    if (o as usize) < coarse {
+        backward[r * volume + k] = o;
+        forward[o as usize * volume + k] = r as u32;
+    }
 }
 
 #[cfg(test)]

@@ -94,8 +94,9 @@ pub struct KernelMap {
     out_table: OnceLock<Arc<NeighborTable>>,
     /// What a deferred map's tables are made from (on a device, or on the host if it asks).
     deferred: Option<Deferred>,
-    /// Built with the map for down maps; for submanifold maps it is the mirror of `out_table`,
-    /// made only if something asks (the kernels run on `pairs`).
+    /// Built with the map for down maps (a deferred one's with `out_table`, on first host use);
+    /// for submanifold maps it is the mirror of `out_table`, made only if something asks (the
+    /// kernels run on `pairs`).
     in_table: OnceLock<Arc<NeighborTable>>,
     pairs: OnceLock<OffsetPairs>,
     pairs_by_input: OnceLock<OffsetPairs>,
