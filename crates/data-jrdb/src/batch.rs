@@ -151,6 +151,38 @@ impl Batch {
     pub fn points(&self, b: usize) -> Vec<[f32; 3]> {
         self.rows(b).map(|r| self.point(r)).collect()
     }
+
+    /// The batch cut into at most `parts` batches of consecutive samples, as even as they go (the
+    /// first ones take one more), none empty (an empty batch stays one): what [`collate`] makes of
+    /// each part's samples, for data-parallel training (one part a device).
+    pub fn split(&self, parts: usize) -> Vec<Batch> {
+        let n = self.len();
+        if n == 0 {
+            return vec![self.clone()];
+        }
+        let parts = parts.clamp(1, n);
+        let mut out = Vec::with_capacity(parts);
+        let mut first = 0;
+        for p in 0..parts {
+            let end = first + n / parts + usize::from(p < n % parts);
+            let rows = self.offsets[first]..self.offsets[end];
+            let coord = |c: &[i32; 4]| [c[0] - first as i32, c[1], c[2], c[3]];
+            out.push(Batch {
+                coords: self.coords[rows.clone()].iter().map(coord).collect(),
+                features: self.features[3 * rows.start..3 * rows.end].to_vec(),
+                centres: self.centres[3 * rows.start..3 * rows.end].to_vec(),
+                offsets: self.offsets[first..=end].iter().map(|o| o - rows.start).collect(),
+                boxes: self.boxes[first..end].to_vec(),
+                num_points: self.num_points[first..end].to_vec(),
+                ignored: self.ignored[first..end].to_vec(),
+                frames: self.frames[first..end].to_vec(),
+                voxel_size: self.voxel_size,
+                clouds: self.clouds[first..end].to_vec(),
+            });
+            first = end;
+        }
+        out
+    }
 }
 
 /// Stacks samples into one batch; the batch index is each sample's position.
@@ -178,4 +210,48 @@ pub fn collate(samples: Vec<Sample>, voxel_size: [f32; 3]) -> Batch {
         b.clouds.push(s.points);
     }
     b
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A sample of `voxels` voxels with one box, named by `i`.
+    fn sample(i: usize, voxels: usize) -> Sample {
+        let coords: Vec<[i32; 3]> = (0..voxels as i32).map(|v| [v + i as i32, 2 * v, -v]).collect();
+        Sample {
+            sequence: format!("seq-{i}"),
+            name: format!("{i:06}"),
+            voxels: Voxels { features: coords.iter().map(|c| c.map(|x| x as f32 * 0.2 + 0.05)).collect(), counts: vec![1; voxels], coords },
+            boxes: vec![Box3d { cx: i as f64, cy: 0.0, cz: 0.0, l: 0.5, w: 0.5, h: 1.7, rot_z: 0.0 }],
+            num_points: vec![voxels as i64],
+            ignored: vec![],
+            n_points: voxels,
+            dropped_out_of_volume: 0,
+            points: (0..voxels).map(|v| [v as f32, i as f32, 0.0]).collect(),
+            augmentation: None,
+        }
+    }
+
+    #[test]
+    fn split_parts_are_the_collated_parts() {
+        let vs = [0.2, 0.2, 0.2];
+        let samples: Vec<Sample> = [3, 5, 1, 4, 2].iter().enumerate().map(|(i, &v)| sample(i, v)).collect();
+        let whole = collate(samples.clone(), vs);
+        for parts in 1..=7 {
+            let split = whole.split(parts);
+            let sizes: Vec<usize> = split.iter().map(Batch::len).collect();
+            let expected_parts = parts.min(5);
+            assert_eq!(split.len(), expected_parts, "{parts} parts");
+            assert!(sizes.iter().max().unwrap() - sizes.iter().min().unwrap() <= 1, "{parts} parts: {sizes:?}");
+            let mut first = 0;
+            for part in &split {
+                let expected = collate(samples[first..first + part.len()].to_vec(), vs);
+                assert_eq!(part, &expected, "{parts} parts, samples from {first}");
+                first += part.len();
+            }
+            assert_eq!(first, 5);
+        }
+        assert_eq!(Batch::default().split(3), vec![Batch::default()]);
+    }
 }

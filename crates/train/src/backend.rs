@@ -35,6 +35,16 @@ impl BackendKind {
         })
     }
 
+    /// The plain device of index `index`: CUDA's GPUs by their index, the other backends' one
+    /// device as 0 (several of them need `--backend cuda`).
+    pub fn device_at(self, index: usize) -> Result<Device> {
+        match (self, index) {
+            (BackendKind::Cuda, i) => sparse_conv::cuda_device(i).map_err(|e| anyhow!("--backend cuda, device {i}: {e}")),
+            (_, 0) => self.device(),
+            (_, i) => Err(anyhow!("train.devices names device {i}, but --backend {} has one device (0); several GPUs need --backend cuda", self.name())),
+        }
+    }
+
     /// The name `BURN_DEVICE` knows it by.
     pub fn name(self) -> &'static str {
         match self {

@@ -89,6 +89,10 @@ pub struct TrainConfig {
     pub val_every: usize,
     /// Also write the latest checkpoint every this many steps (0: at epoch ends only).
     pub checkpoint_every: u64,
+    /// The backend's devices to train on, data-parallel (`[0, 1, 2, 3]`: four GPUs of a CUDA
+    /// machine): each step's batch is cut into one part per device and their gradients are
+    /// averaged on the first. Empty: the backend's one device.
+    pub devices: Vec<usize>,
 }
 
 impl Default for TrainConfig {
@@ -101,6 +105,7 @@ impl Default for TrainConfig {
             schedule: Schedule::default(),
             val_every: 1,
             checkpoint_every: 0,
+            devices: Vec::new(),
         }
     }
 }

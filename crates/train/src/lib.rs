@@ -4,7 +4,8 @@
 //! Crate map:
 //! - setup: [`config`] (the run's TOML), [`schedule`] (lr, the authors' decay), [`backend`]
 //!   (flex, ndarray, wgpu; threads), [`data`] (simulated data on first use, splits, loaders);
-//! - a run: [`run_dir`] (the folder), [`trainer`] (the loop), [`validate`] (AP3D with `eval`),
+//! - a run: [`run_dir`] (the folder), [`trainer`] (the loop; [`data_parallel`] over several
+//!   devices), [`validate`] (AP3D with `eval`),
 //!   [`checkpoint`] (atomic best/latest, resume), [`metrics`] (CSV), [`plots`] (PNG), [`progress`];
 //! - after a run: [`detector`] ([`RunDetector`]: a run's model on point clouds), [`infer`]
 //!   (detection files, official layout, scores), [`calibrate`] (the radial shift of
@@ -28,6 +29,8 @@ pub mod checkpoint;
 pub mod config;
 /// Datasets and loaders of a run.
 pub mod data;
+/// Training on several devices of one machine: a batch's parts, gradients averaged.
+pub mod data_parallel;
 /// A trained detector loaded from a run folder, applied to point clouds.
 pub mod detector;
 /// People in point-cloud files, folders and trees.

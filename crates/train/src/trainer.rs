@@ -93,7 +93,10 @@ pub fn optimizer(cfg: &OptimizerConfig) -> ModuleOptimizer {
 pub fn train(cfg: &RunConfig, run: &RunDir, opts: &TrainOptions) -> Result<TrainSummary> {
     init_threads(cfg.threads)?;
     cfg.kernels.apply();
-    let device = cfg.backend.device()?;
+    let device = match cfg.train.devices.first() {
+        Some(&first) => cfg.backend.device_at(first)?,
+        None => cfg.backend.device()?,
+    };
     // The same seed gives the same initial weights.
     device.seed(cfg.seed);
     let ad = device.clone().autodiff();
@@ -108,10 +111,13 @@ fn term_names(terms: &LossTerms) -> Vec<String> {
 }
 
 /// Trains `model` (initialised on `device.autodiff()`) as `cfg` says, writing into `run`.
-/// `device` is the plain device of the backend; validation runs there.
+/// `device` is the plain device of the backend (with `train.devices`, the first of them);
+/// validation runs there.
 pub fn train_model<D: Detector>(model: D, cfg: &RunConfig, run: &RunDir, opts: &TrainOptions, device: &Device) -> Result<TrainSummary> {
     let ad = device.clone().autodiff();
     let mut session = Session::set_up(cfg, run, opts)?;
+    // The other devices of `train.devices`, each with a replica of the model every step.
+    session.replicas = cfg.train.devices.iter().skip(1).map(|&i| cfg.backend.device_at(i).map(|d| d.autodiff())).collect::<Result<_>>()?;
     let params = model.num_params();
     let (mut model, mut optim) = session.resume(model, optimizer(&cfg.train.optimizer))?;
     session.announce(params);
@@ -161,6 +167,8 @@ struct Session<'a> {
     saved_step: u64,
     last_by_range: Option<[[f64; 3]; 3]>,
     last_heading: Option<HeadingError>,
+    /// The autodiff devices of `train.devices` after the first, one replica each per step.
+    replicas: Vec<Device>,
 }
 
 impl<'a> Session<'a> {
@@ -191,6 +199,7 @@ impl<'a> Session<'a> {
             saved_step: 0,
             last_by_range: None,
             last_heading: None,
+            replicas: Vec::new(),
         })
     }
 
@@ -260,10 +269,31 @@ impl<'a> Session<'a> {
         let t0 = Instant::now();
         let e = state.epoch as f64 + state.batch as f64 / n as f64;
         let lr = self.cfg.train.schedule.lr(e, self.epochs);
-        let terms = model.loss(batch, ad);
-        let names = term_names(&terms);
-        let loss = terms.total.clone().into_scalar::<f32>() as f64;
-        let values: Vec<f64> = terms.terms.iter().map(|(_, t)| t.clone().into_scalar::<f32>() as f64).collect();
+        // One part of the batch per device (one part, the batch itself, on one device), each
+        // part's loss by the model or its replica there.
+        let split;
+        let parts: Vec<&Batch> = if self.replicas.is_empty() {
+            vec![batch]
+        } else {
+            split = batch.split(1 + self.replicas.len());
+            split.iter().collect()
+        };
+        let devices = std::iter::once(ad).chain(&self.replicas);
+        let replicas: Vec<(D, LossTerms)> = parts
+            .iter()
+            .zip(devices)
+            .enumerate()
+            .map(|(i, (part, device))| {
+                let replica = if i == 0 { model.clone() } else { model.clone().fork(device) };
+                let terms = replica.loss(part, device);
+                (replica, terms)
+            })
+            .collect();
+        let names = term_names(&replicas[0].1);
+        // The parts' mean (the batch's own on one device).
+        let mean = |value: &dyn Fn(&LossTerms) -> f64| replicas.iter().map(|(_, t)| value(t)).sum::<f64>() / replicas.len() as f64;
+        let loss = mean(&|t| t.total.clone().into_scalar::<f32>() as f64);
+        let values: Vec<f64> = (0..names.len()).map(|k| mean(&|t| t.terms[k].1.clone().into_scalar::<f32>() as f64)).collect();
         if !loss.is_finite() || values.iter().any(|v| !v.is_finite()) {
             pb.finish_and_clear();
             let parts: Vec<String> = names.iter().zip(&values).map(|(n, v)| format!("{n} {v}")).collect();
@@ -276,7 +306,8 @@ impl<'a> Session<'a> {
                 self.run.checkpoints().display()
             );
         }
-        let grads = GradientsParams::from_grads(terms.total.backward(), &model);
+        let mut grads: Vec<GradientsParams> = replicas.into_iter().map(|(replica, terms)| GradientsParams::from_grads(terms.total.backward(), &replica)).collect();
+        let grads = if grads.len() == 1 { grads.remove(0) } else { crate::data_parallel::average_gradients(grads, &model, ad) };
         let model = optim.step(lr, model, grads);
         let secs = t0.elapsed().as_secs_f64();
         state.step += 1;

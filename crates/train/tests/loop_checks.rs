@@ -191,3 +191,62 @@ fn sweep_skips_finished_runs_and_aggregates_seeds() {
     let unknown = run_sweep(&sweep, &jobs, &["c".into()], |_| panic!("nothing runs"), false).unwrap_err();
     assert!(format!("{unknown}").contains("no variant 'c' (it has: a, b)"), "{unknown}");
 }
+
+/// A one-parameter "detector" whose loss, (w − frames in the batch)², tells the parts of a
+/// data-parallel step apart; it records each part's size.
+#[derive(Module, Debug)]
+struct FrameCount {
+    w: Param<Tensor<1>>,
+    #[module(skip)]
+    parts: Arc<std::sync::Mutex<Vec<usize>>>,
+}
+
+impl Detector for FrameCount {
+    fn loss(&self, batch: &Batch, _device: &Device) -> LossTerms {
+        self.parts.lock().unwrap().push(batch.len());
+        let d = self.w.val() - batch.len() as f32;
+        let total = d.clone() * d;
+        LossTerms { total: total.clone(), terms: vec![("sq", total)] }
+    }
+
+    fn head_output(&self, _batch: &Batch, _device: &Device) -> Vec<f32> {
+        self.w.val().into_data().try_to_vec::<f32>().expect("f32 parameter")
+    }
+
+    fn detect(&self, batch: &Batch, _device: &Device) -> Vec<Detections> {
+        vec![Detections::default(); batch.len()]
+    }
+}
+
+/// `train.devices = [0, 0]`: each batch of 3 frames is cut into parts of 2 and 1, each part's
+/// loss computed by its own replica, the logged loss their mean and the step the one of their
+/// averaged gradients; a device the backend does not have is an error naming it.
+#[test]
+fn two_devices_split_each_batch_and_average_the_parts() {
+    let tmp = tempfile::tempdir().unwrap();
+    let text = format!(
+        "seed = 1\n[data]\nroot = \"{}\"\nvoxel_size = [0.2, 0.2, 0.2]\nprefetch = false\n[data.simulate]\nsequences = 2\nframes = 3\nmax_people = 4\n[model]\nkind = \"person_minkunet\"\n[train]\nbatch_size = 3\nepochs = 3\nval_every = 0\ndevices = [0, 0]\n[train.schedule]\nkind = \"constant\"\nlr = 0.1\n",
+        tmp.path().join("data").display()
+    );
+    let cfg = RunConfig::from_toml_str(&text).unwrap();
+    let run = RunDir::create(tmp.path().join("run"), &cfg, Existing::Refuse).unwrap();
+    let device = Device::flex();
+    let ad = device.clone().autodiff();
+    let parts = Arc::new(std::sync::Mutex::new(Vec::new()));
+    let model = FrameCount { w: Param::from_tensor(Tensor::from_data(TensorData::from([3.0f32]), &ad)), parts: parts.clone() };
+    let s = train_model(model, &cfg, &run, &TrainOptions::default(), &device).unwrap();
+    assert_eq!(s.steps, 3, "1 train sequence × 3 frames, batch 3, 3 epochs");
+    // Validation's forward passes do not call the loss.
+    assert_eq!(*parts.lock().unwrap(), vec![2, 1, 2, 1, 2, 1]);
+    let sq = Table::read(&run.metrics_csv()).unwrap().column("sq").unwrap();
+    assert_eq!(sq[0], 2.5, "the first step logs the mean of (3 − 2)² and (3 − 1)²");
+    // Adam moves w by about lr a step toward 1.5, where the parts' gradients cancel (one device
+    // would move it toward 3, where its loss already is 0).
+    assert!(sq.windows(2).all(|w| w[1] < w[0]), "{sq:?}");
+
+    let cfg = RunConfig::from_toml_str(&text.replace("devices = [0, 0]", "devices = [0, 1]")).unwrap();
+    let run = RunDir::create(tmp.path().join("run-2"), &cfg, Existing::Refuse).unwrap();
+    let model = FrameCount { w: Param::from_tensor(Tensor::from_data(TensorData::from([3.0f32]), &ad)), parts };
+    let err = train_model(model, &cfg, &run, &TrainOptions::default(), &device).expect_err("flex has no device 1").to_string();
+    assert!(err.contains("device 1") && err.contains("--backend cuda"), "{err}");
+}
