@@ -43,6 +43,7 @@ pub(crate) fn count_conv_flops(pairs: usize, c_in: usize, c_out: usize) {
 static READ_BACKS: AtomicU64 = AtomicU64::new(0);
 
 /// Counts one read-back of the op's GPU path (a level's voxel count or coordinates).
+#[cfg_attr(not(feature = "cube"), allow(dead_code))]
 pub(crate) fn count_read_back() {
     READ_BACKS.fetch_add(1, Ordering::Relaxed);
 }

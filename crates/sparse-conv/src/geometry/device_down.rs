@@ -20,7 +20,7 @@ use burn_cubecl::cubecl::client::Client;
 use burn_cubecl::cubecl::prelude::*;
 use burn_cubecl::cubecl::server::Handle;
 
-use crate::geometry::device_maps::{DeviceMap, SCAN_UNITS, fill_kernel, launch_1d, pair_scan_kernel, slot_of};
+use crate::geometry::device_maps::{DeviceMap, fill, launch_1d, scan_counts, slot_of};
 use crate::geometry::kernel_map::NONE;
 
 /// Rows a unit of the numbering walks.
@@ -94,21 +94,8 @@ impl DeviceDown {
                 BLOCK_ROWS,
             );
         }
-        // One "offset" of `blocks` blocks: `total[1]` is the number of coarse voxels.
-        // Safety: one cube reads `blocks` counts, writes as many firsts and 2 totals.
-        unsafe {
-            pair_scan_kernel::launch_unchecked(
-                client,
-                CubeCount::Static(1, 1, 1),
-                CubeDim::new_1d(SCAN_UNITS as u32),
-                BufferArg::from_raw_parts(counts, blocks),
-                BufferArg::from_raw_parts(firsts.clone(), blocks),
-                BufferArg::from_raw_parts(total.clone(), 2),
-                1,
-                blocks,
-                SCAN_UNITS,
-            );
-        }
+        // One group of `blocks` blocks: `total[1]` is the number of coarse voxels.
+        scan_counts(client, &counts, &firsts, &total, 1, blocks);
         let coarse = coarse.unwrap_or_else(|| {
             crate::profile::count_read_back();
             let bytes = client.read_one(total).expect("reading the coarse voxel count back");
@@ -158,19 +145,6 @@ impl DeviceDown {
             );
         }
         Self { map: DeviceMap { forward, backward, rows: coarse, volume }, coarse_coords, coarse }
-    }
-}
-
-/// `handle[..len] = value`, by a kernel (an upload in the middle of a forward pass may wait for
-/// the queue).
-fn fill(client: &Client, handle: &Handle, len: usize, value: u32) {
-    if len == 0 {
-        return;
-    }
-    let (count, dim) = launch_1d(client, len);
-    // Safety: unit `i < len` writes entry `i` of a buffer of at least `len`.
-    unsafe {
-        fill_kernel::launch_unchecked(client, count, dim, BufferArg::from_raw_parts(handle.clone(), len), len, value);
     }
 }
 

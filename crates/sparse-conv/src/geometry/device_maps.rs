@@ -30,7 +30,7 @@ use crate::kernels::cube::upload;
 const BLOCK_ROWS: usize = 512;
 
 /// Units of the one cube that scans the pair counts.
-pub(crate) const SCAN_UNITS: usize = 256;
+const SCAN_UNITS: usize = 256;
 
 /// A map's tables on a device.
 pub(crate) struct DeviceMap {
@@ -58,6 +58,41 @@ pub(crate) fn launch_1d(client: &Client, units: usize) -> (CubeCount, CubeDim) {
     (cubecl::calculate_cube_count_elemwise(client, units.max(1), dim), dim)
 }
 
+/// The exclusive scan, by one cube, of `groups × blocks` counts laid out group by group: where
+/// each (group, block)'s items begin into `firsts`, where each group's begin into
+/// `start[group]`, and the total into `start[groups]`. What every count/scan/scatter build here
+/// and in `device_down`, `device_tiles` shares.
+pub(crate) fn scan_counts(client: &Client, counts: &Handle, firsts: &Handle, start: &Handle, groups: usize, blocks: usize) {
+    // Safety: one cube reads `groups · blocks` counts and writes as many firsts and `groups + 1`
+    // starts, the buffers' sizes by the callers; its units' stretches are clamped to the counts.
+    unsafe {
+        pair_scan_kernel::launch_unchecked(
+            client,
+            CubeCount::Static(1, 1, 1),
+            CubeDim::new_1d(SCAN_UNITS as u32),
+            BufferArg::from_raw_parts(counts.clone(), groups * blocks),
+            BufferArg::from_raw_parts(firsts.clone(), groups * blocks),
+            BufferArg::from_raw_parts(start.clone(), groups + 1),
+            groups,
+            blocks,
+            SCAN_UNITS,
+        );
+    }
+}
+
+/// `handle[..len] = value`, by a kernel: a build runs in the middle of a forward pass, and an
+/// upload there may wait for the queue.
+pub(crate) fn fill(client: &Client, handle: &Handle, len: usize, value: u32) {
+    if len == 0 {
+        return;
+    }
+    let (count, dim) = launch_1d(client, len);
+    // Safety: unit `i < len` writes entry `i` of a buffer of at least `len`.
+    unsafe {
+        fill_kernel::launch_unchecked(client, count, dim, BufferArg::from_raw_parts(handle.clone(), len), len, value);
+    }
+}
+
 impl DeviceMap {
     /// The same tables read the other way: the map transposed, whose outputs are the `rows`
     /// inputs of this one.
@@ -72,14 +107,8 @@ impl DeviceMap {
         let offsets: Vec<i32> = offsets(kernel, -(kernel as i32 / 2), stride).into_iter().flatten().collect();
         let volume = offsets.len() / 3;
         let capacity = (2 * rows).next_power_of_two().max(64);
-        // Zeroed by a kernel, not uploaded: a build runs in the middle of a forward pass, and an
-        // upload there may wait for the queue.
         let slots = client.empty(capacity * size_of::<u32>());
-        let (count, dim) = launch_1d(client, capacity);
-        // Safety: unit `i < capacity` writes slot `i`.
-        unsafe {
-            fill_kernel::launch_unchecked(client, count, dim, BufferArg::from_raw_parts(slots.clone(), capacity), capacity, 0u32);
-        }
+        fill(client, &slots, capacity, 0);
         let forward = client.empty(rows.max(1) * volume * size_of::<u32>());
         let backward = client.empty(rows.max(1) * volume * size_of::<u32>());
         if rows > 0 {
@@ -151,21 +180,7 @@ impl DeviceMap {
                     BLOCK_ROWS,
                 );
             }
-            // Safety: one cube reads `volume · blocks` counts and writes as many firsts and
-            // `volume + 1` starts; its units' stretches are clamped to the counts.
-            unsafe {
-                pair_scan_kernel::launch_unchecked(
-                    client,
-                    CubeCount::Static(1, 1, 1),
-                    CubeDim::new_1d(SCAN_UNITS as u32),
-                    BufferArg::from_raw_parts(counts, volume * blocks),
-                    BufferArg::from_raw_parts(firsts.clone(), volume * blocks),
-                    BufferArg::from_raw_parts(start.clone(), volume + 1),
-                    volume,
-                    blocks,
-                    SCAN_UNITS,
-                );
-            }
+            scan_counts(client, &counts, &firsts, &start, volume, blocks);
             // Safety: unit `(k, b)` writes its block's pairs of offset `k` from its first, the
             // scan's sum of the counts before it: ranges of distinct units do not overlap and
             // end at most at `rows · volume`.
@@ -191,7 +206,7 @@ impl DeviceMap {
 
 /// `values[i] = value` for `i < len`.
 #[cube(launch_unchecked)]
-pub(crate) fn fill_kernel(values: &mut [u32], len: usize, value: u32) {
+fn fill_kernel(values: &mut [u32], len: usize, value: u32) {
     if ABSOLUTE_POS >= len {
         terminate!();
     }
@@ -307,7 +322,7 @@ fn pair_count_kernel(table: &[u32], counts: &mut [u32], rows: usize, volume: usi
 // CubeCL kernels index their buffers; they have no slice iterators.
 #[allow(clippy::needless_range_loop)]
 #[cube(launch_unchecked)]
-pub(crate) fn pair_scan_kernel(counts: &[u32], firsts: &mut [u32], start: &mut [u32], volume: usize, blocks: usize, #[comptime] units: usize) {
+fn pair_scan_kernel(counts: &[u32], firsts: &mut [u32], start: &mut [u32], volume: usize, blocks: usize, #[comptime] units: usize) {
     let len = volume * blocks;
     let u = UNIT_POS as usize;
     let stretch = len.div_ceil(units);

@@ -19,7 +19,7 @@ use burn_cubecl::cubecl::client::Client;
 use burn_cubecl::cubecl::prelude::*;
 use burn_cubecl::cubecl::server::Handle;
 
-use crate::geometry::device_maps::{SCAN_UNITS, launch_1d, pair_scan_kernel};
+use crate::geometry::device_maps::{launch_1d, scan_counts};
 
 /// Most offsets a kernel may have for its plan to be made on the device (one `u32` mask a row).
 pub(crate) const MAX_VOLUME: usize = 32;
@@ -89,24 +89,11 @@ impl DeviceRowTiles {
                 tile_rows,
             );
         }
-        // The scan over `tiles` "offsets" of one block each: `start[t]` is the count before tile
-        // `t`, `start[tiles]` all of them.
+        // The scan over `tiles` groups of one block each: `start[t]` is the count before tile `t`,
+        // `start[tiles]` all of them.
         let firsts = client.empty(tiles * size_of::<u32>());
         let start = client.empty((tiles + 1) * size_of::<u32>());
-        // Safety: one cube reads `tiles` counts, writes as many firsts and `tiles + 1` starts.
-        unsafe {
-            pair_scan_kernel::launch_unchecked(
-                client,
-                CubeCount::Static(1, 1, 1),
-                CubeDim::new_1d(SCAN_UNITS as u32),
-                BufferArg::from_raw_parts(tile_counts, tiles),
-                BufferArg::from_raw_parts(firsts, tiles),
-                BufferArg::from_raw_parts(start.clone(), tiles + 1),
-                tiles,
-                1,
-                SCAN_UNITS,
-            );
-        }
+        scan_counts(client, &tile_counts, &firsts, &start, tiles, 1);
         let offsets_capacity = tiles * volume.max(1);
         let offsets = client.empty(offsets_capacity * size_of::<u32>());
         // Safety: unit `t < tiles` writes its tile's offsets from `start[t]`, at most `volume`
@@ -160,21 +147,7 @@ fn sort_by_mask(client: &Client, masks: &Handle, rows: usize, bits: usize) -> Ha
                 BUCKETS,
             );
         }
-        // Safety: one cube reads `BUCKETS · blocks` counts and writes as many firsts and
-        // `BUCKETS + 1` starts.
-        unsafe {
-            pair_scan_kernel::launch_unchecked(
-                client,
-                CubeCount::Static(1, 1, 1),
-                CubeDim::new_1d(SCAN_UNITS as u32),
-                BufferArg::from_raw_parts(counts.clone(), BUCKETS * blocks),
-                BufferArg::from_raw_parts(firsts.clone(), BUCKETS * blocks),
-                BufferArg::from_raw_parts(bucket_starts.clone(), BUCKETS + 1),
-                BUCKETS,
-                blocks,
-                SCAN_UNITS,
-            );
-        }
+        scan_counts(client, &counts, &firsts, &bucket_starts, BUCKETS, blocks);
         // Safety: unit `b` places its block's rows from its firsts, the scan's sums of the counts
         // before them: every row lands once, below `rows`.
         unsafe {
