@@ -93,6 +93,11 @@ pub struct TrainConfig {
     /// machine): each step's batch is cut into one part per device and their gradients are
     /// averaged on the first. Empty: the backend's one device.
     pub devices: Vec<usize>,
+    /// Start from the weights of another run's latest checkpoint (a run folder, or a shipped one
+    /// such as `weights/person_minkunet`) instead of a random initialisation: fine-tuning. Adam
+    /// and the schedule start afresh; `--resume` of this run still continues from its own latest.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub init: Option<PathBuf>,
 }
 
 impl Default for TrainConfig {
@@ -106,6 +111,7 @@ impl Default for TrainConfig {
             val_every: 1,
             checkpoint_every: 0,
             devices: Vec::new(),
+            init: None,
         }
     }
 }

@@ -224,13 +224,31 @@ impl<'a> Session<'a> {
                     if self.opts.verbose {
                         eprintln!("no checkpoint in {} yet: starting from step 0", self.run.root.display());
                     }
+                    model = self.init(model)?;
                 }
             }
             truncate_after(&self.run.metrics_csv(), "step", self.state.step as f64)?;
             truncate_after(&self.run.epochs_csv(), "epoch", self.state.epoch as f64)?;
+        } else {
+            model = self.init(model)?;
         }
         self.saved_step = self.state.step;
         Ok((model, optim))
+    }
+
+    /// At step 0, `train.init`'s weights (its latest checkpoint); a shape that differs from this
+    /// model's is an error naming the tensor, as Burn's record validation reports it.
+    fn init<D: Detector>(&self, model: D) -> Result<D> {
+        let Some(dir) = &self.cfg.train.init else { return Ok(model) };
+        let files = Checkpoints::new(RunDir::at(dir).checkpoints())
+            .get(Slot::Latest)
+            .with_context(|| format!("train.init = {}", dir.display()))?
+            .with_context(|| format!("train.init = {}: no checkpoint there (expected {})", dir.display(), RunDir::at(dir).checkpoints().join("latest").display()))?;
+        let model = files.load_model(model).with_context(|| format!("train.init = {}: its weights do not fit this run's [model]", dir.display()))?;
+        if self.opts.verbose {
+            eprintln!("starting from the weights of {}", files.model().display());
+        }
+        Ok(model)
     }
 
     fn announce(&self, params: usize) {

@@ -250,3 +250,35 @@ fn two_devices_split_each_batch_and_average_the_parts() {
     let err = train_model(model, &cfg, &run, &TrainOptions::default(), &device).expect_err("flex has no device 1").to_string();
     assert!(err.contains("device 1") && err.contains("--backend cuda"), "{err}");
 }
+
+#[test]
+fn train_init_starts_from_another_runs_weights_and_refuses_what_does_not_fit() {
+    let tmp = tempfile::tempdir().unwrap();
+    let device = Device::flex();
+    let ad = device.clone().autodiff();
+    let toy = |w: &[f32]| Toy { w: Param::from_tensor(Tensor::from_data(TensorData::new(w.to_vec(), [w.len()]), &ad)), calls: Arc::new(AtomicUsize::new(0)), nan_from: usize::MAX };
+    let constant = "val_every = 0\n[train.schedule]\nkind = \"constant\"\nlr = 0.1\n";
+    let first = tmp.path().join("first");
+    let cfg = config(tmp.path(), constant);
+    let run = RunDir::create(&first, &cfg, Existing::Refuse).unwrap();
+    train_model(toy(&[3.0]), &cfg, &run, &TrainOptions::default(), &device).unwrap();
+    let last = Table::read(&run.metrics_csv()).unwrap().column("sq").unwrap()[8];
+
+    // Started from the first run's weights: the first step's loss is at most the first run's
+    // last, not (3 − 1)² = 4 of the random start it was given.
+    let cfg = config(tmp.path(), &format!("init = \"{}\"\n{constant}", first.display()));
+    let run = RunDir::create(tmp.path().join("second"), &cfg, Existing::Refuse).unwrap();
+    train_model(toy(&[3.0]), &cfg, &run, &TrainOptions { max_steps: Some(1), ..Default::default() }, &device).unwrap();
+    let loss = Table::read(&run.metrics_csv()).unwrap().column("sq").unwrap()[0];
+    assert!(loss < last, "first step {loss}, the first run's last {last}");
+
+    // A folder without checkpoints, and weights of another shape, are errors naming the folder.
+    let cfg = config(tmp.path(), &format!("init = \"{}\"\n{constant}", tmp.path().join("data").display()));
+    let run = RunDir::create(tmp.path().join("third"), &cfg, Existing::Refuse).unwrap();
+    let err = format!("{:#}", train_model(toy(&[3.0]), &cfg, &run, &TrainOptions::default(), &device).unwrap_err());
+    assert!(err.contains("no checkpoint there") && err.contains("data"), "{err}");
+    let cfg = config(tmp.path(), &format!("init = \"{}\"\n{constant}", first.display()));
+    let run = RunDir::create(tmp.path().join("fourth"), &cfg, Existing::Refuse).unwrap();
+    let err = format!("{:#}", train_model(toy(&[3.0, 3.0]), &cfg, &run, &TrainOptions::default(), &device).unwrap_err());
+    assert!(err.contains("do not fit") && err.contains("first") && err.contains("shape"), "{err}");
+}
