@@ -58,7 +58,7 @@ impl std::fmt::Display for Slot {
 }
 
 impl Slot {
-    fn file(self) -> &'static str {
+    pub(crate) fn file(self) -> &'static str {
         match self {
             Slot::Latest => "latest",
             Slot::Best => "best",

@@ -20,6 +20,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, bail};
 
 use crate::config::RunConfig;
+use crate::checkpoint::Slot;
 
 /// Paths of one run folder.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -50,6 +51,9 @@ impl RunDir {
     pub fn create(root: impl Into<PathBuf>, cfg: &RunConfig, existing: Existing) -> Result<Self> {
         let dir = Self::at(root);
         let has_run = dir.config_file().exists();
+        // A run that failed before its first step (bad data, a missing `train.init`) left only
+        // its config: nothing to lose, so the next attempt starts over without --overwrite.
+        let existing = if existing == Existing::Refuse && has_run && !dir.started() { Existing::Overwrite } else { existing };
         match (existing, has_run) {
             (Existing::Refuse, true) => bail!(
                 "{} already holds a run; pass --resume to continue it or --overwrite to start over",
@@ -78,6 +82,11 @@ impl RunDir {
             write_atomic(&dir.config_file(), cfg.to_toml()?.as_bytes())?;
         }
         Ok(dir)
+    }
+
+    /// Whether the run has taken a step: a metrics row, a checkpoint or a summary.
+    fn started(&self) -> bool {
+        self.metrics_csv().exists() || self.checkpoints().join(Slot::Latest.file()).exists() || self.summary_json().exists()
     }
 
     /// The stored, resolved config.

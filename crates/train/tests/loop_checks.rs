@@ -277,6 +277,11 @@ fn train_init_starts_from_another_runs_weights_and_refuses_what_does_not_fit() {
     let run = RunDir::create(tmp.path().join("third"), &cfg, Existing::Refuse).unwrap();
     let err = format!("{:#}", train_model(toy(&[3.0]), &cfg, &run, &TrainOptions::default(), &device).unwrap_err());
     assert!(err.contains("no checkpoint there") && err.contains("data"), "{err}");
+    // That run failed before its first step, so its folder does not block the next attempt; a
+    // run that has taken steps does.
+    RunDir::create(tmp.path().join("third"), &cfg, Existing::Refuse).expect("a folder with only a config is started over");
+    let err = RunDir::create(&first, &cfg, Existing::Refuse).err().expect("a trained run is kept").to_string();
+    assert!(err.contains("already holds a run"), "{err}");
     let cfg = config(tmp.path(), &format!("init = \"{}\"\n{constant}", first.display()));
     let run = RunDir::create(tmp.path().join("fourth"), &cfg, Existing::Refuse).unwrap();
     let err = format!("{:#}", train_model(toy(&[3.0, 3.0]), &cfg, &run, &TrainOptions::default(), &device).unwrap_err());
