@@ -236,7 +236,8 @@ pub fn parse_value(text: &str) -> Result<toml::Value> {
     })
 }
 
-/// Sets `key.path` in a TOML document, creating tables on the way. Whether the key exists in the
+/// Sets `key.path` in a TOML document, creating tables on the way; a number indexes an array
+/// (`data.also_train.1.root`: the second `[[data.also_train]]`). Whether the key exists in the
 /// config is checked when the document is parsed into a [`RunConfig`].
 pub fn set_key(doc: &mut toml::Value, key: &str, value: toml::Value) -> Result<()> {
     let parts: Vec<&str> = key.split('.').collect();
@@ -245,11 +246,28 @@ pub fn set_key(doc: &mut toml::Value, key: &str, value: toml::Value) -> Result<(
     }
     let mut node = doc;
     for p in &parts[..parts.len() - 1] {
-        let table = node.as_table_mut().with_context(|| format!("`{key}`: `{p}` is inside a value, not a table"))?;
-        node = table.entry(p.to_string()).or_insert_with(|| toml::Value::Table(Default::default()));
+        node = match node {
+            toml::Value::Array(items) => {
+                let n = items.len();
+                let i: usize = p.parse().with_context(|| format!("`{key}`: `{p}` is inside an array, so it must be an index"))?;
+                items.get_mut(i).with_context(|| format!("`{key}`: index {i}, but the array has {n} entries"))?
+            }
+            toml::Value::Table(table) => table.entry(p.to_string()).or_insert_with(|| toml::Value::Table(Default::default())),
+            _ => bail!("`{key}`: `{p}` is inside a value, not a table"),
+        };
     }
-    let table = node.as_table_mut().with_context(|| format!("`{key}`: the parent is not a table"))?;
-    table.insert(parts[parts.len() - 1].to_string(), value);
+    let last = parts[parts.len() - 1];
+    match node {
+        toml::Value::Array(items) => {
+            let n = items.len();
+            let i: usize = last.parse().with_context(|| format!("`{key}`: `{last}` is inside an array, so it must be an index"))?;
+            *items.get_mut(i).with_context(|| format!("`{key}`: index {i}, but the array has {n} entries"))? = value;
+        }
+        toml::Value::Table(table) => {
+            table.insert(last.to_string(), value);
+        }
+        _ => bail!("`{key}`: the parent is not a table"),
+    }
     Ok(())
 }
 
@@ -330,5 +348,21 @@ mod tests {
         assert_eq!(c.train.schedule, Schedule::Constant { lr: 1e-3 });
         set_key(&mut v, "train.nope", parse_value("1").unwrap()).unwrap();
         assert!(RunConfig::from_toml_value(v).unwrap_err().to_string().contains("nope"));
+    }
+
+    #[test]
+    fn overrides_index_arrays_of_tables() {
+        let text = format!("{MIN}[[data.also_train]]\nroot = \"a\"\n[[data.also_train]]\nroot = \"b\"\n[data.also_train.simulate]\nsequences = 530\n");
+        let mut v: toml::Value = toml::from_str(&text).unwrap();
+        set_key(&mut v, "data.also_train.1.root", parse_value("c").unwrap()).unwrap();
+        set_key(&mut v, "data.also_train.1.simulate.sequences", parse_value("7").unwrap()).unwrap();
+        let c = RunConfig::from_toml_value(v.clone()).unwrap();
+        let roots: Vec<_> = c.data.also_train.iter().map(|t| t.root.clone()).collect();
+        assert_eq!(roots, [PathBuf::from("a"), PathBuf::from("c")]);
+        assert_eq!(c.data.also_train[1].simulate.as_ref().unwrap().sequences, Some(7));
+        let err = set_key(&mut v, "data.also_train.2.root", parse_value("d").unwrap()).unwrap_err().to_string();
+        assert!(err.contains("index 2, but the array has 2 entries"), "{err}");
+        let err = set_key(&mut v, "data.also_train.first.root", parse_value("d").unwrap()).unwrap_err().to_string();
+        assert!(err.contains("must be an index"), "{err}");
     }
 }
