@@ -204,7 +204,8 @@ impl<'a> Session<'a> {
     }
 
     /// With `--resume`, the latest checkpoint's weights, optimiser state and position, and the
-    /// CSV rows written after it dropped; otherwise what it was given.
+    /// CSV rows written after it dropped; a run at step 0 starts from `train.init`'s weights if
+    /// set, otherwise from what it was given.
     fn resume<D: Detector>(&mut self, mut model: D, mut optim: ModuleOptimizer) -> Result<(D, ModuleOptimizer)> {
         if self.opts.resume {
             match self.ckpts.get(Slot::Latest)? {
