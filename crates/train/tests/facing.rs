@@ -38,7 +38,9 @@ fn fits_a_stage_that_turns_only_headings() {
     // directions are near chance.
     let (before, after) = (network.direction_right.unwrap(), staged.direction_right.unwrap());
     assert!(after > before + 0.1 && after > 0.7, "{before} → {after}");
-    assert_eq!(network.median_axis_deg, staged.median_axis_deg, "the axis is the network's");
+    // A half turn in f64 moves a heading's axis by rounding only (1e-13° on the shipped weights).
+    let (axis, staged_axis) = (network.median_axis_deg, staged.median_axis_deg);
+    assert!((axis - staged_axis).abs() < 1e-9, "the axis is the network's: {axis} → {staged_axis}");
     let path = report.written.unwrap();
     assert_eq!(path.file_name().unwrap(), FACING_FILE);
     assert!(path.starts_with(run.checkpoints()));
