@@ -247,28 +247,27 @@ pub fn set_key(doc: &mut toml::Value, key: &str, value: toml::Value) -> Result<(
     let mut node = doc;
     for p in &parts[..parts.len() - 1] {
         node = match node {
-            toml::Value::Array(items) => {
-                let n = items.len();
-                let i: usize = p.parse().with_context(|| format!("`{key}`: `{p}` is inside an array, so it must be an index"))?;
-                items.get_mut(i).with_context(|| format!("`{key}`: index {i}, but the array has {n} entries"))?
-            }
+            toml::Value::Array(items) => array_entry(items, p, key)?,
             toml::Value::Table(table) => table.entry(p.to_string()).or_insert_with(|| toml::Value::Table(Default::default())),
             _ => bail!("`{key}`: `{p}` is inside a value, not a table"),
         };
     }
     let last = parts[parts.len() - 1];
     match node {
-        toml::Value::Array(items) => {
-            let n = items.len();
-            let i: usize = last.parse().with_context(|| format!("`{key}`: `{last}` is inside an array, so it must be an index"))?;
-            *items.get_mut(i).with_context(|| format!("`{key}`: index {i}, but the array has {n} entries"))? = value;
-        }
+        toml::Value::Array(items) => *array_entry(items, last, key)? = value,
         toml::Value::Table(table) => {
             table.insert(last.to_string(), value);
         }
         _ => bail!("`{key}`: the parent is not a table"),
     }
     Ok(())
+}
+
+/// The entry of `items` that the path part `p` of `key` indexes.
+fn array_entry<'a>(items: &'a mut [toml::Value], p: &str, key: &str) -> Result<&'a mut toml::Value> {
+    let n = items.len();
+    let i: usize = p.parse().with_context(|| format!("`{key}`: `{p}` is inside an array, so it must be an index"))?;
+    items.get_mut(i).with_context(|| format!("`{key}`: index {i}, but the array has {n} entries"))
 }
 
 #[cfg(test)]

@@ -19,8 +19,8 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 
-use crate::config::RunConfig;
 use crate::checkpoint::Slot;
+use crate::config::RunConfig;
 
 /// Paths of one run folder.
 #[derive(Debug, Clone, PartialEq, Eq)]

@@ -225,12 +225,12 @@ impl<'a> Session<'a> {
                     if self.opts.verbose {
                         eprintln!("no checkpoint in {} yet: starting from step 0", self.run.root.display());
                     }
-                    model = self.init(model)?;
                 }
             }
             truncate_after(&self.run.metrics_csv(), "step", self.state.step as f64)?;
             truncate_after(&self.run.epochs_csv(), "epoch", self.state.epoch as f64)?;
-        } else {
+        }
+        if self.state.step == 0 {
             model = self.init(model)?;
         }
         self.saved_step = self.state.step;
@@ -241,10 +241,11 @@ impl<'a> Session<'a> {
     /// model's is an error naming the tensor, as Burn's record validation reports it.
     fn init<D: Detector>(&self, model: D) -> Result<D> {
         let Some(dir) = &self.cfg.train.init else { return Ok(model) };
-        let files = Checkpoints::new(RunDir::at(dir).checkpoints())
+        let checkpoints = RunDir::at(dir).checkpoints();
+        let files = Checkpoints::new(&checkpoints)
             .get(Slot::Latest)
             .with_context(|| format!("train.init = {}", dir.display()))?
-            .with_context(|| format!("train.init = {}: no checkpoint there (expected {})", dir.display(), RunDir::at(dir).checkpoints().join("latest").display()))?;
+            .with_context(|| format!("train.init = {}: no checkpoint there (expected {})", dir.display(), checkpoints.join("latest").display()))?;
         let model = files.load_model(model).with_context(|| format!("train.init = {}: its weights do not fit this run's [model]", dir.display()))?;
         if self.opts.verbose {
             eprintln!("starting from the weights of {}", files.model().display());
