@@ -124,8 +124,7 @@ pub fn vote<S: Copy + Into<f64>>(
     for (slot, &i) in kept.iter().enumerate() {
         grid.insert(&boxes[i], slot);
     }
-    // Weighted sums of cx, cy, cz, l, w, h, the weight, cos 2θ and sin 2θ, per kept box.
-    let mut sums = vec![[0.0f64; 9]; kept.len()];
+    let mut means = vec![BoxMean::default(); kept.len()];
     for (b, &s) in boxes.iter().zip(scores) {
         let s: f64 = s.into();
         if s.is_nan() || s <= score_threshold {
@@ -141,39 +140,45 @@ pub fn vote<S: Copy + Into<f64>>(
             .filter(|&(d, _)| d <= radius)
             .min_by(|x, y| x.0.total_cmp(&y.0));
         if let Some((_, slot)) = nearest {
-            let (s2, c2) = (2.0 * b.rot_z).sin_cos();
-            for (a, v) in sums[slot]
-                .iter_mut()
-                .zip([b.cx, b.cy, b.cz, b.l, b.w, b.h, 1.0, c2, s2])
-            {
-                *a += s * v;
-            }
+            means[slot].add(b, s);
         }
     }
-    kept.iter()
-        .zip(&sums)
-        .map(|(&i, acc)| {
-            let m = |k: usize| acc[k] / acc[6];
-            let own = boxes[i].rot_z;
-            let rot_z = if axis && acc[7].hypot(acc[8]) > 1e-9 {
-                let phi = 0.5 * acc[8].atan2(acc[7]);
-                // φ or φ + π, whichever is nearer the kept box's heading, in the same turn as it.
-                let half = std::f64::consts::FRAC_PI_2;
-                wrap_angle(own + ((phi - own + half).rem_euclid(std::f64::consts::PI) - half))
-            } else {
-                own
-            };
-            Box3d {
-                cx: m(0),
-                cy: m(1),
-                cz: m(2),
-                l: m(3),
-                w: m(4),
-                h: m(5),
-                rot_z,
-            }
-        })
-        .collect()
+    kept.iter().zip(&means).map(|(&i, mean)| mean.mean(boxes[i].rot_z, axis)).collect()
+}
+
+/// A running weighted mean of boxes: centre and size, and the heading's axis as the mean of
+/// `(cos 2θ, sin 2θ)` (so headings π apart agree). What box voting and the fusion of several
+/// passes' boxes compute.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct BoxMean {
+    /// Weighted sums of cx, cy, cz, l, w, h, the weight, cos 2θ and sin 2θ.
+    sums: [f64; 9],
+}
+
+impl BoxMean {
+    /// Adds `b` with weight `w` (> 0).
+    pub fn add(&mut self, b: &Box3d, w: f64) {
+        let (s2, c2) = (2.0 * b.rot_z).sin_cos();
+        for (a, v) in self.sums.iter_mut().zip([b.cx, b.cy, b.cz, b.l, b.w, b.h, 1.0, c2, s2]) {
+            *a += w * v;
+        }
+    }
+
+    /// The mean box (at least one box added). Its heading: with `axis`, the mean axis turned to
+    /// the side of `own` (in (−π, π]); without, `own`.
+    pub fn mean(&self, own: f64, axis: bool) -> Box3d {
+        let acc = &self.sums;
+        let m = |k: usize| acc[k] / acc[6];
+        let rot_z = if axis && acc[7].hypot(acc[8]) > 1e-9 {
+            let phi = 0.5 * acc[8].atan2(acc[7]);
+            // φ or φ + π, whichever is nearer `own`, in the same turn as it.
+            let half = std::f64::consts::FRAC_PI_2;
+            wrap_angle(own + ((phi - own + half).rem_euclid(std::f64::consts::PI) - half))
+        } else {
+            own
+        };
+        Box3d { cx: m(0), cy: m(1), cz: m(2), l: m(3), w: m(4), h: m(5), rot_z }
+    }
 }
 
 /// Whether kept box `a` suppresses `b` under the distance criterion of the authors' `dist_bev`.

@@ -41,7 +41,8 @@ impl ModelConfig {
         match self {
             ModelConfig::PersonMinkunet(c) => c.validate(),
             ModelConfig::Centerpoint(_) => Ok(()),
-        }
+        }?;
+        self.post().validate()
     }
 
     /// The post-processing of either model.

@@ -10,6 +10,8 @@
 //! - [`centerpoint`]: the dense baseline, laid out the same way (encoder, grid, backbone, head,
 //!   targets, loss, decoding, config).
 //! - [`post`]: score threshold, NMS, box voting and caps, shared by both.
+//! - [`test_time`]: the cloud seen at half or quarter turns and the passes fused
+//!   ([`GridTurn`], [`fuse`]), applied where a trained model detects (`train::RunDetector`).
 //! - [`facing`]: the second stage that turns a box's heading to the direction the points in it
 //!   show (fitted per run; IoU does not see the direction, so AP does not change).
 //!
@@ -31,6 +33,8 @@ pub mod facing;
 pub mod person_minkunet;
 /// Post-processing shared by both models.
 pub mod post;
+/// Test-time turns and the fusion of their detections.
+pub mod test_time;
 
 pub use centerpoint::{CenterPoint, CenterPointConfig};
 pub use config::ModelConfig;
@@ -38,3 +42,4 @@ pub use detector::{Detections, Detector, LossTerms};
 pub use facing::{FacingClassifier, FacingFeatures, FacingSample};
 pub use person_minkunet::{BoxCoder, BoxFrame, MinkUNet, MinkUNetConfig, PersonMinkUNet, PersonMinkUNetConfig, TargetVariant, UNetLevels};
 pub use post::{NmsKind, PostProcessConfig};
+pub use test_time::{GridTurn, fuse};

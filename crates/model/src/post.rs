@@ -67,6 +67,14 @@ pub struct PostProcessConfig {
     /// model is loaded for inference (`infer`, a sweep's `--rescore`, `detect`, `serve`), not in
     /// training's validation, `calibrate` or `facing` itself.
     pub facing_stage: bool,
+    /// Where a trained run's model detects (`train::RunDetector`: `detect`, `serve`, `infer`,
+    /// `calibrate`, `facing`, the library), run it on the cloud at this many equal turns about the
+    /// vertical axis (1, 2 or 4: the voxel grid's own symmetries) and fuse the passes
+    /// (`crate::test_time`); 1: one pass (the authors'). Training's validation runs one pass.
+    pub test_time_turns: usize,
+    /// Boxes of different passes whose bird's-eye centres lie within this radius (metres) of
+    /// the best one are one person.
+    pub test_time_radius: f64,
 }
 
 impl Default for PostProcessConfig {
@@ -85,11 +93,22 @@ impl Default for PostProcessConfig {
             merge_power: 1.0,
             radial_shift: 0.0,
             facing_stage: true,
+            test_time_turns: 1,
+            test_time_radius: 0.6,
         }
     }
 }
 
 impl PostProcessConfig {
+    /// Checks values serde cannot.
+    pub fn validate(&self) -> Result<(), String> {
+        crate::test_time::GridTurn::passes(self.test_time_turns)?;
+        if !(self.test_time_radius > 0.0 && self.test_time_radius.is_finite()) {
+            return Err(format!("model.post.test_time_radius must be a positive number of metres, got {}", self.test_time_radius));
+        }
+        Ok(())
+    }
+
     /// The `eval` NMS settings this config stands for.
     pub fn nms_config(&self) -> NmsConfig {
         NmsConfig {

@@ -19,7 +19,7 @@ use anyhow::{Context, Result};
 use burn::module::Module;
 use burn::tensor::Device;
 use data_jrdb::{Batch, Frame, collate, prepare};
-use model::{CenterPoint, Detections, Detector, FacingClassifier, ModelConfig, PersonMinkUNet};
+use model::{CenterPoint, Detections, Detector, FacingClassifier, GridTurn, ModelConfig, PersonMinkUNet, fuse};
 use rand::SeedableRng;
 
 use crate::backend::{BackendKind, init_threads};
@@ -34,14 +34,15 @@ enum Model {
     Centerpoint(CenterPoint),
 }
 
-/// A run's model with its weights, its voxelization and its post-processing (the checkpoint's
-/// facing stage included), on one device.
+/// A run's model with its weights, its voxelization and its post-processing (test-time turns and
+/// the checkpoint's facing stage included), on one device.
 pub struct RunDetector {
     model: Model,
     config: RunConfig,
     device: Device,
     checkpoint: PathBuf,
     facing: Option<FacingClassifier>,
+    turns: Vec<GridTurn>,
 }
 
 impl RunDetector {
@@ -58,6 +59,7 @@ impl RunDetector {
         if let Some(b) = backend {
             config.backend = b;
         }
+        let turns = GridTurn::passes(config.model.post().test_time_turns).map_err(anyhow::Error::msg)?;
         init_threads(config.threads)?;
         config.kernels.apply();
         let files = Checkpoints::new(RunDir::at(run).checkpoints())
@@ -69,7 +71,7 @@ impl RunDetector {
             ModelConfig::Centerpoint(c) => Model::Centerpoint(files.load_model(c.init(&device))?.valid()),
         };
         let facing = if config.model.post().facing_stage { load_facing(&files.dir)? } else { None };
-        Ok(Self { model, config, device, checkpoint: files.dir, facing })
+        Ok(Self { model, config, device, checkpoint: files.dir, facing, turns })
     }
 
     /// The resolved config the detector runs with.
@@ -96,21 +98,32 @@ impl RunDetector {
     /// People in one cloud of points in JRDB's base frame (metres; x forward, y left, z up),
     /// best first: voxelized as the run was trained, detected, post-processed.
     pub fn detect(&self, points: &[[f32; 3]]) -> Detections {
-        let frame = Frame {
-            sequence: String::new(),
-            name: String::new(),
-            points: points.to_vec(),
-            n_upper: points.len(),
-            dropped_non_finite: 0,
-            boxes: Vec::new(),
-            num_points: Vec::new(),
-            label_ids: Vec::new(),
-            ignored: Vec::new(),
-        };
-        // Evaluation samples draw nothing at random (no augmentation, no cap).
-        let sample = prepare(frame, &self.config.data.eval_sample(), &mut rand_chacha::ChaCha8Rng::seed_from_u64(0));
-        let batch = collate(vec![sample], self.config.data.voxel_size);
+        let batch = self.batch_of(vec![(String::new(), String::new(), points.to_vec())]);
         self.detect_batch(&batch).pop().unwrap_or_default()
+    }
+
+    /// Clouds in the base frame, each with its `(sequence, frame name)`, as one evaluation batch.
+    fn batch_of(&self, clouds: Vec<(String, String, Vec<[f32; 3]>)>) -> Batch {
+        let cfg = self.config.data.eval_sample();
+        let samples = clouds
+            .into_iter()
+            .map(|(sequence, name, points)| {
+                let frame = Frame {
+                    sequence,
+                    name,
+                    n_upper: points.len(),
+                    points,
+                    dropped_non_finite: 0,
+                    boxes: Vec::new(),
+                    num_points: Vec::new(),
+                    label_ids: Vec::new(),
+                    ignored: Vec::new(),
+                };
+                // Evaluation samples draw nothing at random (no augmentation, no cap).
+                prepare(frame, &cfg, &mut rand_chacha::ChaCha8Rng::seed_from_u64(0))
+            })
+            .collect();
+        collate(samples, self.config.data.voxel_size)
     }
 
     /// Detections for every sample of a batch prepared as [`DataConfig::eval_sample`] says. The
@@ -119,15 +132,52 @@ impl RunDetector {
     ///
     /// [`DataConfig::eval_sample`]: data_jrdb::DataConfig::eval_sample
     pub fn detect_batch(&self, batch: &Batch) -> Vec<Detections> {
-        let mut found = match &self.model {
-            Model::PersonMinkunet(m) => m.detect(batch, &self.device),
-            Model::Centerpoint(m) => m.detect(batch, &self.device),
-        };
+        let mut found = self.forward(batch);
+        if self.turns.len() > 1 && batch.clouds.len() == batch.len() {
+            found = self.fused_over_turns(batch, found);
+        }
         if let Some(stage) = &self.facing {
             for (d, cloud) in found.iter_mut().zip(&batch.clouds) {
                 stage.orient_all(cloud, &mut d.boxes);
             }
         }
         found
+    }
+
+    /// The network and its post-processing on one batch.
+    fn forward(&self, batch: &Batch) -> Vec<Detections> {
+        match &self.model {
+            Model::PersonMinkunet(m) => m.detect(batch, &self.device),
+            Model::Centerpoint(m) => m.detect(batch, &self.device),
+        }
+    }
+
+    /// `first` (the detections in `batch` as it is) fused with those in its clouds at the other
+    /// test-time turns, turned back.
+    fn fused_over_turns(&self, batch: &Batch, first: Vec<Detections>) -> Vec<Detections> {
+        let post = self.config.model.post();
+        let mut passes: Vec<Vec<Detections>> = first.into_iter().map(|d| vec![d]).collect();
+        for &turn in self.turns.iter().filter(|t| !t.is_identity()) {
+            let clouds = batch
+                .frames
+                .iter()
+                .zip(&batch.clouds)
+                .map(|((sequence, name), cloud)| (sequence.clone(), name.clone(), cloud.iter().map(|&p| turn.point(p)).collect()))
+                .collect();
+            for (seen, d) in passes.iter_mut().zip(self.forward(&self.batch_of(clouds))) {
+                seen.push(Detections { boxes: d.boxes.iter().map(|b| turn.undo(b)).collect(), scores: d.scores });
+            }
+        }
+        passes
+            .iter()
+            .map(|seen| {
+                let mut d = fuse(seen, post.test_time_radius, post.merge_heading);
+                if let Some(max) = post.max_boxes {
+                    d.boxes.truncate(max);
+                    d.scores.truncate(max);
+                }
+                d
+            })
+            .collect()
     }
 }
