@@ -1,5 +1,6 @@
 //! The library API on the shipped weights: one cloud at a time gives exactly the boxes the batch
-//! path (`infer`'s) gives for the same frames, and a bad run folder is an error naming it.
+//! path (`infer`'s) gives for the same frames, test-time turns turn with the cloud, and a bad run
+//! folder is an error naming it.
 
 use std::path::Path;
 
@@ -37,4 +38,42 @@ fn a_folder_without_a_run_is_an_error_naming_it() {
     let tmp = tempfile::tempdir().unwrap();
     let e = RunDetector::load(tmp.path(), Slot::Latest, None).err().unwrap();
     assert!(format!("{e:#}").contains(&tmp.path().display().to_string()), "{e:#}");
+}
+
+/// With four test-time turns the passes over a cloud and over the same cloud turned by a quarter
+/// are the same four clouds, so the fused boxes turn with the cloud (up to the order of the
+/// fusion's sums); a pass whose boxes were not turned back, or turned the wrong way, breaks it.
+#[test]
+fn with_four_turns_the_boxes_turn_with_the_cloud() {
+    let tmp = tempfile::tempdir().unwrap();
+    let root = tmp.path().join("sim");
+    synth(&root, &SynthConfig { sequences: 1, frames: 1, seed: 12, max_people: 12, ..Default::default() }).unwrap();
+    let mut cfg = train::RunDir::at(&weights()).config().unwrap();
+    cfg.model.post_mut().test_time_turns = 4;
+    let detector = RunDetector::with_config(&weights(), cfg, Slot::Latest, None).unwrap();
+    let ds = Dataset::open(&root, &detector.config().data.dataset(Split::TrainVal)).unwrap();
+    let points = ds.load(0).unwrap().points;
+    let quarter: Vec<[f32; 3]> = points.iter().map(|&[x, y, z]| [-y, x, z]).collect();
+    let (a, b) = (detector.detect(&points), detector.detect(&quarter));
+    let strong = a.scores.iter().filter(|&&s| s >= 0.5).count();
+    assert!(strong > 0, "the weights find people in the frame");
+    assert_eq!(a.boxes.len(), b.boxes.len());
+    for (p, s) in a.boxes.iter().zip(&a.scores) {
+        // p turned by a quarter is one of b's boxes (the order of near-equal scores may differ).
+        let (q, t) = b
+            .boxes
+            .iter()
+            .zip(&b.scores)
+            .min_by(|x, y| (x.0.cx + p.cy).hypot(x.0.cy - p.cx).total_cmp(&(y.0.cx + p.cy).hypot(y.0.cy - p.cx)))
+            .unwrap();
+        assert!((-p.cy - q.cx).abs() < 1e-4 && (p.cx - q.cy).abs() < 1e-4 && (p.cz - q.cz).abs() < 1e-4, "{p:?} turned is not {q:?}");
+        // The axis agrees modulo π (the facing stage picks the direction).
+        let axis = (q.rot_z - p.rot_z - std::f64::consts::FRAC_PI_2).rem_euclid(std::f64::consts::PI);
+        assert!((p.l - q.l).abs() < 1e-4 && (p.w - q.w).abs() < 1e-4 && axis.min(std::f64::consts::PI - axis) < 1e-4, "{p:?} vs {q:?}");
+        assert!((s - t).abs() < 1e-5, "scores {s} and {t}");
+    }
+    // One pass alone does not turn with the cloud this exactly: what the turns average out.
+    let one = RunDetector::load(&weights(), Slot::Latest, None).unwrap();
+    let (c, d) = (one.detect(&points), one.detect(&quarter));
+    assert!(c.scores.iter().zip(&d.scores).any(|(s, t)| (s - t).abs() > 1e-3) || c.boxes.len() != d.boxes.len());
 }
