@@ -12,6 +12,7 @@ use std::collections::HashMap;
 use eval::nms::BoxMean;
 
 use crate::detector::Detections;
+use crate::person_minkunet::box_coder::wrap_angle;
 
 /// A turn of the cloud about z by `quarters` quarter turns, counter-clockwise (x toward y).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -54,9 +55,7 @@ impl GridTurn {
             2 => (-b.cx, -b.cy),
             _ => (-b.cy, b.cx),
         };
-        let turned = b.rot_z - f64::from(self.quarters) * std::f64::consts::FRAC_PI_2;
-        let r = turned.rem_euclid(std::f64::consts::TAU);
-        let rot_z = if r > std::f64::consts::PI { r - std::f64::consts::TAU } else { r };
+        let rot_z = wrap_angle(b.rot_z - f64::from(self.quarters) * std::f64::consts::FRAC_PI_2);
         Box3d { cx, cy, rot_z, ..*b }
     }
 }
