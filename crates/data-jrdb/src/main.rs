@@ -63,6 +63,10 @@ enum Cmd {
         /// removed) instead of simulated places: --sequences sequences over them in turn.
         #[arg(long, value_name = "DIR")]
         backdrops: Option<PathBuf>,
+        /// With --backdrops: the share of sequences (0–1) whose scan is thinned to a 32-beam
+        /// sensor's density, people ray-cast with its kept beams.
+        #[arg(long, default_value_t = 0.0, requires = "backdrops")]
+        thinned_share: f64,
     },
     /// Print frames, points, voxels and boxes per frame and points per box of a dataset.
     Stats {
@@ -113,7 +117,7 @@ fn open_all(root: &std::path::Path, format: DatasetFormat, sequences: Option<Vec
 
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.cmd {
-        Cmd::Synth { out, sequences, frames, seed, max_people, encoding, preset, backdrops } => {
+        Cmd::Synth { out, sequences, frames, seed, max_people, encoding, preset, backdrops, thinned_share } => {
             let encoding = match encoding {
                 Enc::Ascii => Encoding::Ascii,
                 Enc::Binary => Encoding::Binary,
@@ -125,7 +129,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 Some(PresetArg::BenchV2) => SynthConfig { encoding, ..Preset::BenchV2.synth(seed) },
                 None => {
                     let world = if backdrops.is_some() { World::Backdrops } else { World::V1 };
-                    SynthConfig { sequences, frames, seed, max_people, encoding, world, backdrops, ..Default::default() }
+                    SynthConfig { sequences, frames, seed, max_people, encoding, world, backdrops, thinned_share, ..Default::default() }
                 }
             };
             let s = synth(&out, &cfg)?;

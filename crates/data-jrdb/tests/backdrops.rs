@@ -94,3 +94,71 @@ fn a_bad_index_is_named_with_its_line() {
     let e = synth(tempfile::tempdir().unwrap().path(), &config(bd.path(), 0)).unwrap_err().to_string();
     assert!(e.contains("missing.npy"), "{e}");
 }
+
+/// The backdrop of `write_backdrop` written ring after ring, each ring from −π round (as KITTI's
+/// HDL-64E files are), which is how its rings are told apart: its steep beams meet the road
+/// within a few metres, too near to be told apart by elevation.
+fn write_ring_major_backdrop(dir: &std::path::Path) {
+    let road = Prim { shape: Shape::PlaneZ(-HEIGHT), reflectivity: 0.3 };
+    let wall = Prim { shape: Shape::Cuboid { c: [10.5, 0.0, 1.5 - HEIGHT], half: [0.5, 30.0, 1.5], yaw: 0.0 }, reflectivity: 0.5 };
+    let m = SensorModel::Hdl64e;
+    let mut rets = m.scanner().scan_beams(&m.elevations(), &[road, wall], [0.0; 3], 0.0, None, 11);
+    rets.sort_by(|a, b| a.ring.cmp(&b.ring).then(a.xyz[1].atan2(a.xyz[0]).total_cmp(&b.xyz[1].atan2(b.xyz[0]))));
+    let bytes: Vec<u8> = rets.iter().flat_map(|r| r.xyz.map(|v| v as f32)).flat_map(f32::to_le_bytes).collect();
+    std::fs::write(dir.join("street.npy"), encode_npy("<f4", &format!("({}, 3)", rets.len()), &bytes)).unwrap();
+    std::fs::write(dir.join("backdrops.csv"), "file,sensor,source\nstreet.npy,hdl64e,made by this test\n").unwrap();
+}
+
+#[test]
+fn a_thinned_backdrop_keeps_a_32_beam_sensors_rings_and_its_people_are_as_sparse() {
+    let bd = tempfile::tempdir().unwrap();
+    write_ring_major_backdrop(bd.path());
+    let open = |root: &std::path::Path| Dataset::open(root, &DatasetConfig { split: Split::TrainVal, require_labels: false, ..Default::default() }).unwrap();
+    let (dense, sparse) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    let base = SynthConfig { sequences: 6, frames: 1, max_people: 24, ..config(bd.path(), 9) };
+    synth(dense.path(), &base).unwrap();
+    let summary = synth(sparse.path(), &SynthConfig { thinned_share: 1.0, ..base.clone() }).unwrap();
+    assert!(summary.sequences.iter().all(|s| s.starts_with("bd-train-thin-street-")), "{:?}", summary.sequences);
+    let (dense, sparse) = (open(dense.path()), open(sparse.path()));
+    // Elevations seen from the sensor (straight above the base frame's origin, HEIGHT over the floor).
+    let elevation = |p: &[f32; 3]| (p[2] as f64 - (HEIGHT - 0.7)).atan2((p[0] as f64).hypot(p[1] as f64)).to_degrees();
+    let (mut dense_pts, mut sparse_pts, mut people) = (0, 0, 0);
+    for i in 0..sparse.len() {
+        let (d, s) = (dense.load(i).unwrap(), sparse.load(i).unwrap());
+        dense_pts += d.points.len();
+        sparse_pts += s.points.len();
+        // The road's and the wall's returns lie on rings at least 1.2° apart (within their noise).
+        let mut rings: Vec<f64> = s.points.iter().filter(|p| p[0].hypot(p[1]) > 6.0).map(elevation).collect();
+        rings.sort_by(f64::total_cmp);
+        let mut centres: Vec<f64> = Vec::new();
+        for e in rings {
+            if centres.last().is_none_or(|c| e - c > 0.2) {
+                centres.push(e);
+            }
+        }
+        assert!(centres.windows(2).all(|w| w[1] - w[0] > 1.0), "{}: rings at {centres:?}", s.sequence);
+        // People are labelled from the returns they keep, and keep at least three.
+        for b in &s.boxes {
+            people += 1;
+            let inside = s.points.iter().filter(|p| b.contains(p.map(f64::from))).count();
+            assert!(inside >= 3, "{}: a person with {inside} returns", s.sequence);
+        }
+    }
+    assert!(people >= 6, "only {people} people in 6 frames");
+    // Every fourth or third ring and every other column: about a seventh of the returns.
+    assert!(sparse_pts * 5 < dense_pts && sparse_pts * 12 > dense_pts, "{sparse_pts} returns thinned from {dense_pts}");
+}
+
+#[test]
+fn a_thinned_share_is_checked_and_an_unthinnable_backdrop_named() {
+    let bd = tempfile::tempdir().unwrap();
+    write_backdrop(bd.path());
+    let out = tempfile::tempdir().unwrap();
+    let e = synth(out.path(), &SynthConfig { thinned_share: 1.5, ..config(bd.path(), 0) }).unwrap_err().to_string();
+    assert!(e.contains("thinned_share") && e.contains("1.5"), "{e}");
+    let e = synth(out.path(), &SynthConfig { thinned_share: 0.5, world: World::V1, backdrops: None, ..config(bd.path(), 0) }).unwrap_err().to_string();
+    assert!(e.contains("thinned_share") && e.contains("backdrops"), "{e}");
+    // Written column by column, with its steep beams only near: no way to tell its rings apart.
+    let e = synth(out.path(), &SynthConfig { thinned_share: 1.0, ..config(bd.path(), 0) }).unwrap_err().to_string();
+    assert!(e.contains("street.npy") && e.contains("cannot thin"), "{e}");
+}

@@ -19,6 +19,7 @@ use super::lidar::{Return, tip};
 use super::people::{Activity, Body, place, tight_box};
 use super::scene::Prim;
 use super::sensors::SensorModel;
+use super::thin::{find_rings, thin};
 use super::writer::{SynthConfig, label, mix, mkdir, write_cloud};
 use crate::calibration::{Calibration, Lidar};
 use crate::cloud::read_cloud;
@@ -76,11 +77,47 @@ pub fn read_backdrops(dir: &Path) -> Result<Vec<Backdrop>> {
     Ok(out)
 }
 
-/// A sequence's name: its split, its backdrop's file stem and its index.
-pub fn sequence_name(b: &Backdrop, index: usize) -> String {
+/// A sequence's name: its split, `thin-` where its scan is thinned, its backdrop's file stem and
+/// its index.
+pub fn sequence_name(b: &Backdrop, index: usize, thinned: bool) -> String {
     let stem = b.file.file_stem().and_then(|s| s.to_str()).unwrap_or("scan");
     let stem: String = stem.chars().map(|c| if c.is_ascii_alphanumeric() { c } else { '-' }).collect();
-    format!("bd-train-{stem}-{index:03}")
+    let thin = if thinned { "thin-" } else { "" };
+    format!("bd-train-{thin}{stem}-{index:03}")
+}
+
+/// A 32-beam sensor's spacing (an HDL-32E's: 1.33° between beams, 0.33° between columns at
+/// 20 Hz), a little under so that a 0.33° table keeps every fourth ring rather than every fifth.
+const THIN_BEAMS: f64 = 1.2;
+const THIN_COLUMNS: f64 = 0.33;
+
+/// What people are cast with and merged into: the backdrop's returns, beams and mechanics, or
+/// those of the backdrop thinned to a 32-beam sensor.
+struct View<'a> {
+    points: std::borrow::Cow<'a, [[f32; 3]]>,
+    elevations: Vec<f64>,
+    scanner: super::lidar::Scanner,
+}
+
+impl<'a> View<'a> {
+    fn of(b: &'a Backdrop, thinned: bool) -> Result<Self> {
+        let scanner = b.sensor.scanner();
+        if !thinned {
+            return Ok(View { points: (&b.points[..]).into(), elevations: b.sensor.elevations(), scanner });
+        }
+        let beams = b.sensor.elevations().len();
+        let rings = find_rings(&b.points, beams).ok_or_else(|| {
+            DataError::new(&b.file, ErrorKind::Layout(format!("cannot thin it: neither its elevations nor its written order tell its {beams} rings apart")))
+        })?;
+        let t = thin(&b.points, &rings, scanner.columns, THIN_BEAMS.to_radians(), THIN_COLUMNS.to_radians());
+        Ok(View { points: t.points.into(), elevations: t.elevations, scanner: super::lidar::Scanner { columns: t.columns, ..scanner } })
+    }
+}
+
+/// Whether sequence `si` of a tree seeded `seed` is thinned: an independent draw per sequence
+/// (not its index's parity, which `si % backdrops` would tie to the backdrop).
+fn is_thinned(seed: u64, si: usize, share: f64) -> bool {
+    share > 0.0 && ((mix(mix(seed, si as u64), 0x7468_696E) >> 11) as f64 / (1u64 << 53) as f64) < share
 }
 
 /// The levelled frame of a backdrop: its sensor at the origin, the ground at `-height`.
@@ -263,7 +300,9 @@ pub(super) fn synth_backdrops(layout: &Layout, backdrops: &[Backdrop], cfg: &Syn
     let (mut names, mut n_frames, mut n_points, mut n_boxes) = (Vec::new(), 0, 0, 0);
     for si in 0..cfg.sequences {
         let b = &backdrops[si % backdrops.len()];
-        let seq = sequence_name(b, si);
+        let thinned = is_thinned(cfg.seed, si, cfg.thinned_share);
+        let view = View::of(b, thinned)?;
+        let seq = sequence_name(b, si, thinned);
         for l in Lidar::BOTH {
             mkdir(&layout.cloud_dir(l, &seq))?;
         }
@@ -273,17 +312,17 @@ pub(super) fn synth_backdrops(layout: &Layout, backdrops: &[Backdrop], cfg: &Syn
         let level = Level::of(&b.ground);
         let levelled: Vec<V3> = b.points.iter().map(|&p| level.point(p)).collect();
         let ground = FreeGround::new(&levelled, -level.height);
-        let (elevations, scanner) = (b.sensor.elevations(), b.sensor.scanner());
+        let (elevations, scanner) = (&view.elevations, view.scanner);
         let mut labels = BTreeMap::new();
         let mut times = Vec::new();
         for fi in 0..cfg.frames {
             let people = populate(&ground, cfg.max_people, &mut rng);
             let prims: Vec<Prim> = people.iter().flat_map(|p| p.prims.iter().copied()).collect();
             let scan_seed = mix(seq_seed, fi as u64 + 1);
-            let rets = scanner.scan_beams(&elevations, &prims, [0.0; 3], 0.0, Some(level.tilt), scan_seed);
+            let rets = scanner.scan_beams(elevations, &prims, [0.0; 3], 0.0, Some(level.tilt), scan_seed);
             // The scan's first column: the same draw `scan_beams` makes from its seed.
             let start = super::lidar::column_start(scan_seed, scanner.columns);
-            let (kept, mut rets) = merge(&b.points, rets, start, scanner.columns, &elevations);
+            let (kept, mut rets) = merge(&view.points, rets, start, scanner.columns, elevations);
             let in_level = |r: &Return| {
                 let q = level.point(r.xyz.map(|v| v as f32));
                 [q[0] as f32, q[1] as f32, q[2] as f32]
@@ -307,7 +346,7 @@ pub(super) fn synth_backdrops(layout: &Layout, backdrops: &[Backdrop], cfg: &Syn
                 [s[0] as f32, s[1] as f32, s[2] as f32]
             };
             let mut xyz: Vec<[f32; 3]> = kept.iter().map(|&p| to_written(p)).collect();
-            let mut all: Vec<Return> = kept.iter().map(|&p| Return { xyz: p, intensity: 0.0, ring: ray_cell(p, start, scanner.columns, &elevations).1 }).collect();
+            let mut all: Vec<Return> = kept.iter().map(|&p| Return { xyz: p, intensity: 0.0, ring: ray_cell(p, start, scanner.columns, elevations).1 }).collect();
             xyz.extend(rets.iter().map(|r| to_written(r.xyz)));
             all.extend(rets);
             let name = format!("{fi:06}");

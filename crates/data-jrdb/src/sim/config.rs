@@ -40,6 +40,11 @@ pub struct SimulateConfig {
     /// places. Training sequences only (`bd-train-*`); `preset` is not used with it.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub backdrops: Option<std::path::PathBuf>,
+    /// With `backdrops`: the share of its sequences (0–1) whose real scan is thinned to a
+    /// 32-beam sensor's density (rings 1.2° apart, columns 0.33°), people ray-cast with the kept
+    /// beams: far, sparse people in a place sampled as sparsely (0 without it).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub thinned_share: Option<f64>,
 }
 
 impl SimulateConfig {
@@ -58,6 +63,7 @@ impl SimulateConfig {
             naming: self.naming.unwrap_or(base.naming),
             world: if self.backdrops.is_some() { super::World::Backdrops } else { base.world },
             backdrops: self.backdrops.clone(),
+            thinned_share: self.thinned_share.unwrap_or(base.thinned_share),
             ..base
         }
     }

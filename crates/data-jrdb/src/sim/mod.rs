@@ -12,6 +12,7 @@ pub mod rig;
 pub mod scene;
 pub mod sensors;
 mod street;
+pub mod thin;
 pub mod world_v2;
 pub mod writer;
 

@@ -43,6 +43,9 @@ pub struct SynthConfig {
     pub world: World,
     /// With [`World::Backdrops`]: the folder of real scans (`backdrops.csv`) people are put into.
     pub backdrops: Option<std::path::PathBuf>,
+    /// With [`World::Backdrops`]: the share of sequences whose scan is thinned to a 32-beam
+    /// sensor's density, people ray-cast with its kept beams (`sim::thin`; 0: none).
+    pub thinned_share: f64,
 }
 
 /// The simulator's generations; a new one never changes what an older one writes.
@@ -140,6 +143,7 @@ impl Default for SynthConfig {
             naming: Naming::Jrdb,
             world: World::V1,
             backdrops: None,
+            thinned_share: 0.0,
         }
     }
 }
@@ -225,6 +229,12 @@ pub(super) fn mkdir(p: &Path) -> Result<()> {
 pub fn synth(out: &Path, cfg: &SynthConfig) -> Result<SynthSummary> {
     if cfg.frame_step == 0 {
         return Err(DataError::key(out, "frame_step", "must be at least 1"));
+    }
+    if !(0.0..=1.0).contains(&cfg.thinned_share) {
+        return Err(DataError::key(out, "thinned_share", format!("{} is not a share between 0 and 1", cfg.thinned_share)));
+    }
+    if cfg.thinned_share > 0.0 && cfg.world != World::Backdrops {
+        return Err(DataError::key(out, "thinned_share", "thins real backdrops: set `backdrops` too"));
     }
     let layout = Layout { root: out.to_path_buf() };
     let calib = Calibration::default();
