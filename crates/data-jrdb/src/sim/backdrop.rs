@@ -86,9 +86,10 @@ pub fn sequence_name(b: &Backdrop, index: usize, thinned: bool) -> String {
     format!("bd-train-{thin}{stem}-{index:03}")
 }
 
-/// A 32-beam sensor's spacing (an HDL-32E's: 1.33° between beams, 0.33° between columns at
-/// 20 Hz), a little under so that a 0.33° table keeps every fourth ring rather than every fifth.
+/// A thinned scan's least spacing of rings (degrees): a little under an HDL-32E's 1.33°, so that a
+/// table 0.33° apart keeps every fourth ring rather than every fifth.
 const THIN_BEAMS: f64 = 1.2;
+/// A thinned scan's least spacing of columns (degrees): an HDL-32E's at 20 Hz.
 const THIN_COLUMNS: f64 = 0.33;
 
 /// What people are cast with and merged into: the backdrop's returns, beams and mechanics, or
