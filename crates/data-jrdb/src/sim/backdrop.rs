@@ -19,7 +19,7 @@ use super::lidar::{Return, tip};
 use super::people::{Activity, Body, place, tight_box};
 use super::scene::Prim;
 use super::sensors::SensorModel;
-use super::thin::{find_rings, thin};
+use super::thin::{find_rings, nearest, thin};
 use super::writer::{SynthConfig, label, mix, mkdir, write_cloud};
 use crate::calibration::{Calibration, Lidar};
 use crate::cloud::read_cloud;
@@ -242,15 +242,7 @@ fn ray_cell(p: V3, start: f64, columns: usize, elevations: &[f64]) -> (u32, u16)
     let az = p[1].atan2(p[0]) - start;
     let col = (az / std::f64::consts::TAU * columns as f64).round().rem_euclid(columns as f64) as u32;
     let el = (p[2] / (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt()).asin();
-    let k = elevations.partition_point(|&e| e < el);
-    let beam = if k == 0 {
-        0
-    } else if k == elevations.len() || el - elevations[k - 1] < elevations[k] - el {
-        k - 1
-    } else {
-        k
-    };
-    (col, beam as u16)
+    (col, nearest(elevations, el) as u16)
 }
 
 fn range(p: V3) -> f64 {

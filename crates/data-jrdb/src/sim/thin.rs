@@ -42,6 +42,12 @@ fn elevation(p: [f32; 3]) -> f64 {
     z.atan2(x.hypot(y))
 }
 
+/// The index of the value of `sorted` (ascending, not empty) nearest `x`, the lower on a tie.
+pub(super) fn nearest(sorted: &[f64], x: f64) -> usize {
+    let k = sorted.partition_point(|&c| c < x);
+    if k == sorted.len() || (k > 0 && x - sorted[k - 1] < sorted[k] - x) { k - 1 } else { k }
+}
+
 fn median(v: &mut [f64]) -> f64 {
     v.sort_by(f64::total_cmp);
     v[v.len() / 2]
@@ -73,12 +79,7 @@ fn by_elevation(points: &[[f32; 3]]) -> Option<Rings> {
     }
     let of_point = points
         .iter()
-        .map(|&p| {
-            let e = elevation(p);
-            let k = centres.partition_point(|&c| c < e);
-            let k = if k == centres.len() || (k > 0 && e - centres[k - 1] < centres[k] - e) { k - 1 } else { k };
-            k as u16
-        })
+        .map(|&p| nearest(&centres, elevation(p)) as u16)
         .collect();
     Some(Rings { of_point, elevation: centres })
 }
@@ -151,8 +152,8 @@ pub struct Thinned {
 }
 
 /// Keeps the rings at least `beam_spacing` apart (radians; lowest ring first) and one column in
-/// `k`, the smallest `k` whose columns lie at least `column_spacing` apart (radians) for a sensor
-/// of `columns` columns. A column is an azimuth band of one source column's width every `k`:
+/// `k`, the whole `k` nearest `column_spacing` over a column of a sensor of `columns` columns
+/// (radians; at least 1). A column is an azimuth band of one source column's width every `k`:
 /// each ring fires once in it whatever its azimuth offset, so no phase has to be known.
 pub fn thin(points: &[[f32; 3]], rings: &Rings, columns: usize, beam_spacing: f64, column_spacing: f64) -> Thinned {
     let mut keep = vec![false; rings.elevation.len()];
