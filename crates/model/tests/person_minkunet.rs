@@ -35,6 +35,43 @@ fn local_input_features_place_each_point_inside_its_voxel() {
 }
 
 #[test]
+fn range_height_input_holds_no_direction() {
+    let batch = sim_batch("range-height", 1, 8, 10.0, 5);
+    let device = Device::flex();
+    let x = PersonMinkUNet::input(&batch, InputFeatures::RangeHeight, &device);
+    assert_eq!(x.channels(), 5);
+    let f = x.features().into_data().try_to_vec::<f32>().unwrap();
+    let local = PersonMinkUNet::input(&batch, InputFeatures::XyzLocal, &device).features().into_data().try_to_vec::<f32>().unwrap();
+    for row in 0..batch.num_voxels() {
+        let p = batch.point(row);
+        assert!((f[5 * row] - (p[0] * p[0] + p[1] * p[1]).sqrt()).abs() < 1e-5, "row {row}: horizontal range");
+        assert_eq!(f[5 * row + 1], p[2], "row {row}: height");
+        assert_eq!(&f[5 * row + 2..5 * row + 5], &local[6 * row + 3..6 * row + 6], "row {row}: offsets inside the voxel as xyz_local's");
+    }
+    assert!(PersonMinkUNetConfig { in_channels: 5, input: InputFeatures::RangeHeight, ..small() }.validate().is_ok());
+}
+
+#[test]
+fn weights_carried_to_a_wider_input_compute_the_same_boxes() {
+    // xyz_local holds xyz's channels and three more: with the new channels' weights at zero, the
+    // carried network's output is the trained one's.
+    let batch = sim_batch("carry", 1, 8, 10.0, 5);
+    let device = Device::flex();
+    let cfg = small();
+    let model = common::initialised(&device, Some(3), || cfg.init(&device));
+    let before = model.head_output(&batch, &device);
+    let carried = model.with_input(InputFeatures::XyzLocal);
+    assert_eq!((carried.config.in_channels, carried.config.validate()), (6, Ok(())));
+    let after = carried.head_output(&batch, &device);
+    assert_eq!(before.len(), after.len());
+    let worst = before.iter().zip(&after).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
+    assert!(worst < 1e-4, "outputs differ by {worst}");
+    // Back to xyz: the same weights as at the start.
+    let back = carried.with_input(InputFeatures::Xyz).head_output(&batch, &device);
+    assert!(before.iter().zip(&back).all(|(a, b)| (a - b).abs() < 1e-4));
+}
+
+#[test]
 fn unet_levels_keep_their_coordinates() {
     let batch = sim_batch("unet", 2, 8, 10.0, 5);
     let device = Device::flex();

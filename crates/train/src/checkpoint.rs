@@ -7,7 +7,7 @@
 //! (temporary file + rename). Folders no pointer names are removed afterwards. So at every instant
 //! `latest` and `best` name complete checkpoints.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use burn::module::Module;
@@ -66,6 +66,11 @@ impl Slot {
     }
 }
 
+/// Loads the weights in `path` (burnpack) into `model` (same architecture).
+pub fn load_model_file<M: Module>(model: M, path: &Path) -> Result<M> {
+    model.try_load_file(path).map_err(|e| anyhow::anyhow!("loading {}: {e:?}", path.display()))
+}
+
 /// A run's `checkpoints/` folder.
 #[derive(Debug, Clone)]
 pub struct Checkpoints {
@@ -101,7 +106,7 @@ impl CheckpointFiles {
 
     /// Loads the weights into `model` (same architecture).
     pub fn load_model<M: Module>(&self, model: M) -> Result<M> {
-        model.try_load_file(self.model()).map_err(|e| anyhow::anyhow!("loading {}: {e:?}", self.model().display()))
+        load_model_file(model, &self.model())
     }
 
     /// Loads the optimizer state into `optim`.

@@ -7,21 +7,24 @@
 //! restoring weights, Adam's moments and that position continues the run exactly, and the CSV rows
 //! written after the checkpoint are dropped and written again.
 
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use burn::grad_clipping::GradientClippingConfig;
+use burn::module::Module;
 use burn::optim::decay::WeightDecayConfig;
 use burn::optim::{GradientsParams, ModuleOptimizer};
 use burn::tensor::Device;
 use indicatif::ProgressBar;
 use data_jrdb::{Batch, Loader};
+use model::person_minkunet::PersonMinkUNet;
 use model::{Detector, LossTerms, ModelConfig};
 use serde::{Deserialize, Serialize};
 use sparse_conv::FusedAdamConfig;
 
 use crate::backend::init_threads;
-use crate::checkpoint::{Checkpoints, Slot, TrainState};
+use crate::checkpoint::{CheckpointFiles, Checkpoints, Slot, TrainState, load_model_file};
 use crate::config::{OptimizerConfig, RunConfig};
 use crate::data::{ensure_training_data, eval_loader, train_loader};
 use crate::metrics::{CsvLog, epoch_header, field, step_header, truncate_after};
@@ -246,11 +249,35 @@ impl<'a> Session<'a> {
             .get(Slot::Latest)
             .with_context(|| format!("train.init = {}", dir.display()))?
             .with_context(|| format!("train.init = {}: no checkpoint there (expected {})", dir.display(), checkpoints.join("latest").display()))?;
-        let model = files.load_model(model).with_context(|| format!("train.init = {}: its weights do not fit this run's [model]", dir.display()))?;
+        let model = match self.init_for_input(dir, &files)? {
+            // Kept: Burn reads a loaded file's tensors lazily, and it says what the run started from.
+            Some(carried) => load_model_file(model, &carried).with_context(|| format!("train.init = {}: its weights do not fit this run's [model]", dir.display()))?,
+            None => files.load_model(model).with_context(|| format!("train.init = {}: its weights do not fit this run's [model]", dir.display()))?,
+        };
         if self.opts.verbose {
             eprintln!("starting from the weights of {}", files.model().display());
         }
         Ok(model)
+    }
+
+    /// When `train.init`'s Person-MinkUNet was fed another input than this run's, its weights
+    /// carried over to this run's input ([`PersonMinkUNet::with_input`]), written to the run's
+    /// `init-carried.bpk`; `None` when the weights load as they are.
+    fn init_for_input(&self, dir: &Path, files: &CheckpointFiles) -> Result<Option<PathBuf>> {
+        let ModelConfig::PersonMinkunet(ours) = &self.cfg.model else { return Ok(None) };
+        let theirs = RunDir::at(dir).config().with_context(|| format!("train.init = {}", dir.display()))?;
+        let ModelConfig::PersonMinkunet(theirs) = &theirs.model else { return Ok(None) };
+        if theirs.input == ours.input {
+            return Ok(None);
+        }
+        let device = self.cfg.backend.device()?;
+        let trained = files.load_model(PersonMinkUNet::new(theirs, &device)).with_context(|| format!("train.init = {}", dir.display()))?;
+        let path = self.run.root.join("init-carried.bpk");
+        trained.with_input(ours.input).save_file(&path).map_err(|e| anyhow::anyhow!("writing {}: {e:?}", path.display()))?;
+        if self.opts.verbose {
+            eprintln!("train.init = {}: input {:?} carried over to {:?} (the channels both hold; zero for the others)", dir.display(), theirs.input, ours.input);
+        }
+        Ok(Some(path))
     }
 
     fn announce(&self, params: usize) {

@@ -287,3 +287,53 @@ fn train_init_starts_from_another_runs_weights_and_refuses_what_does_not_fit() {
     let err = format!("{:#}", train_model(toy(&[3.0, 3.0]), &cfg, &run, &TrainOptions::default(), &device).unwrap_err());
     assert!(err.contains("do not fit") && err.contains("first") && err.contains("shape"), "{err}");
 }
+
+#[test]
+fn train_init_carries_weights_over_to_another_input() {
+    use model::person_minkunet::InputFeatures;
+    use model::{ModelConfig, PersonMinkUNet};
+    let tmp = tempfile::tempdir().unwrap();
+    let cfg = |input: &str, channels: usize, init: &str| {
+        RunConfig::from_toml_str(&format!(
+            "seed = 1\n[data]\nroot = \"{}\"\nvoxel_size = [0.2, 0.2, 0.2]\nprefetch = false\n[data.simulate]\nsequences = 2\nframes = 2\nmax_people = 4\n[model]\nkind = \"person_minkunet\"\nwidth = 0.25\ninput = \"{input}\"\nin_channels = {channels}\n[train]\nbatch_size = 1\nepochs = 1\nval_every = 0\n{init}[train.schedule]\nkind = \"constant\"\nlr = 1e-12\n",
+            tmp.path().join("data").display()
+        ))
+        .unwrap()
+    };
+    let opts = TrainOptions { max_steps: Some(1), ..Default::default() };
+    let latest = |run: &RunDir, cfg: &RunConfig| {
+        let ModelConfig::PersonMinkunet(c) = &cfg.model else { unreachable!() };
+        let files = Checkpoints::new(run.checkpoints()).get(Slot::Latest).unwrap().expect("a checkpoint");
+        files.load_model(PersonMinkUNet::new(c, &Device::flex())).unwrap()
+    };
+    let xyz = cfg("xyz", 3, "");
+    let first = RunDir::create(tmp.path().join("xyz"), &xyz, Existing::Refuse).unwrap();
+    train::train(&xyz, &first, &opts).unwrap();
+    let trained = latest(&first, &xyz);
+
+    let init = format!("init = \"{}\"\n", first.root.display());
+    let range_height = cfg("range_height", 5, &init);
+    let second = RunDir::create(tmp.path().join("range_height"), &range_height, Existing::Refuse).unwrap();
+    train::train(&range_height, &second, &opts).unwrap();
+    assert!(second.root.join("init-carried.bpk").is_file(), "the carried weights the run started from are kept beside it");
+    let carried = latest(&second, &range_height);
+    assert_eq!(carried.config.input, InputFeatures::RangeHeight);
+    let (old, new) = (trained.backbone.stem[0].weight.val(), carried.backbone.stem[0].weight.val());
+    let [k, c_in, c_out] = new.dims();
+    assert_eq!([k, c_in], [27, 5]);
+    let (old, new) = (old.into_data().try_to_vec::<f32>().unwrap(), new.into_data().try_to_vec::<f32>().unwrap());
+    for kk in 0..k {
+        for o in 0..c_out {
+            // range_height's channels: range, z, dx, dy, dz; xyz's: x, y, z.
+            let z = (old[(kk * 3 + 2) * c_out + o], new[(kk * 5 + 1) * c_out + o]);
+            assert!((z.0 - z.1).abs() < 1e-6, "offset {kk}, out {o}: z weight {} became {}", z.0, z.1);
+            for ch in [0, 2, 3, 4] {
+                assert!(new[(kk * 5 + ch) * c_out + o].abs() < 1e-6, "channel {ch} starts at zero");
+            }
+        }
+    }
+    // Every other weight came over as it was (a step of lr 1e-12 moves nothing visibly).
+    let head = |m: &PersonMinkUNet| m.head.weight.val().into_data().try_to_vec::<f32>().unwrap();
+    let (a, b) = (head(&trained), head(&carried));
+    assert!(a.iter().zip(&b).all(|(a, b)| (a - b).abs() < 1e-6));
+}

@@ -30,15 +30,27 @@ pub enum InputFeatures {
     /// [−½, ½] (`in_channels = 6`). Batch norm scales raw x by its spread over the scene (metres),
     /// so a few centimetres inside a voxel all but vanish from the raw channels; these keep them.
     XyzLocal,
+    /// The point's horizontal range from the sensor's vertical axis and its height,
+    /// `(√(x² + y²), z)` in metres, and its place inside its voxel as in `xyz_local`
+    /// (`in_channels = 5`). No channel holds the direction the point lies in, so a person's
+    /// features do not depend on which way from the sensor they stand.
+    RangeHeight,
 }
 
 impl InputFeatures {
+    /// What each channel holds, in order: channels of two inputs with the same name hold the same
+    /// value (`x`, `y`, `z` raw; `range` horizontal; `dx`, `dy`, `dz` inside the voxel).
+    pub fn channel_names(self) -> &'static [&'static str] {
+        match self {
+            Self::Xyz => &["x", "y", "z"],
+            Self::XyzLocal => &["x", "y", "z", "dx", "dy", "dz"],
+            Self::RangeHeight => &["range", "z", "dx", "dy", "dz"],
+        }
+    }
+
     /// Channels per voxel.
     pub fn channels(self) -> usize {
-        match self {
-            Self::Xyz => 3,
-            Self::XyzLocal => 6,
-        }
+        self.channel_names().len()
     }
 }
 
@@ -46,7 +58,7 @@ impl InputFeatures {
 #[derive(Serialize, Deserialize, Debug, Clone, PartialEq)]
 #[serde(default, deny_unknown_fields)]
 pub struct PersonMinkUNetConfig {
-    /// Input feature channels: 3 for `input = "xyz"`, 6 for `"xyz_local"`.
+    /// Input feature channels: 3 for `input = "xyz"`, 6 for `"xyz_local"`, 5 for `"range_height"`.
     pub in_channels: usize,
     /// The input features (the authors' raw xyz).
     pub input: InputFeatures,

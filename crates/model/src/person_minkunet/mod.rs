@@ -21,7 +21,7 @@ pub use config::{InputFeatures, PersonMinkUNetConfig, TargetVariant};
 use data_jrdb::Batch;
 use sparse_conv::SparseTensor;
 use sparse_conv::modules::per_voxel_linear;
-use sparse_conv::burn::module::Module;
+use sparse_conv::burn::module::{Module, Param};
 use sparse_conv::burn::nn::{Linear, LinearConfig};
 use sparse_conv::burn::tensor::{Device, Tensor, TensorData};
 
@@ -81,9 +81,38 @@ impl PersonMinkUNet {
                     [p[0], p[1], p[2], local[0], local[1], local[2]]
                 })
                 .collect(),
+            InputFeatures::RangeHeight => (0..m)
+                .flat_map(|row| {
+                    let (p, c) = (batch.point(row), batch.centre(row));
+                    let local = [0, 1, 2].map(|k| (p[k] - c[k]) / batch.voxel_size[k]);
+                    [p[0].hypot(p[1]), p[2], local[0], local[1], local[2]]
+                })
+                .collect(),
         };
         let features = Tensor::<2>::from_data(TensorData::new(values, [m, features.channels()]), device);
         SparseTensor::new(features, batch.coords.clone()).expect("a collated batch has unique, in-range voxels")
+    }
+
+    /// These weights fed `input` instead: every weight kept, the first convolution's for each
+    /// channel both inputs hold (by [`InputFeatures::channel_names`]) and zero for the others, so
+    /// a fine-tuning run with another input starts from what the network learned.
+    pub fn with_input(mut self, input: InputFeatures) -> Self {
+        let old = self.config.input.channel_names();
+        let weight = self.backbone.stem[0].weight.val();
+        let [volume, _, c_out] = weight.dims();
+        let device = weight.device();
+        let columns: Vec<Tensor<3>> = input
+            .channel_names()
+            .iter()
+            .map(|name| match old.iter().position(|o| o == name) {
+                Some(i) => weight.clone().narrow(1, i, 1),
+                None => Tensor::zeros([volume, 1, c_out], &device),
+            })
+            .collect();
+        self.backbone.stem[0].weight = Param::from_tensor(Tensor::cat(columns, 1));
+        self.config.input = input;
+        self.config.in_channels = input.channels();
+        self
     }
 
     /// Head output for every voxel of the batch, `[M, coder().channels()]` (layout in [`box_coder`]).
