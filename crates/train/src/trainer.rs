@@ -249,11 +249,8 @@ impl<'a> Session<'a> {
             .get(Slot::Latest)
             .with_context(|| format!("train.init = {}", dir.display()))?
             .with_context(|| format!("train.init = {}: no checkpoint there (expected {})", dir.display(), checkpoints.join("latest").display()))?;
-        let model = match self.init_for_input(dir, &files)? {
-            // Kept: Burn reads a loaded file's tensors lazily, and it says what the run started from.
-            Some(carried) => load_model_file(model, &carried).with_context(|| format!("train.init = {}: its weights do not fit this run's [model]", dir.display()))?,
-            None => files.load_model(model).with_context(|| format!("train.init = {}: its weights do not fit this run's [model]", dir.display()))?,
-        };
+        let weights = self.init_for_input(dir, &files)?.unwrap_or_else(|| files.model());
+        let model = load_model_file(model, &weights).with_context(|| format!("train.init = {}: its weights do not fit this run's [model]", dir.display()))?;
         if self.opts.verbose {
             eprintln!("starting from the weights of {}", files.model().display());
         }
@@ -262,7 +259,8 @@ impl<'a> Session<'a> {
 
     /// When `train.init`'s Person-MinkUNet was fed another input than this run's, its weights
     /// carried over to this run's input ([`PersonMinkUNet::with_input`]), written to the run's
-    /// `init-carried.bpk`; `None` when the weights load as they are.
+    /// `init-carried.bpk` (kept: Burn reads a loaded file's tensors lazily, and it says what the
+    /// run started from); `None` when the weights load as they are.
     fn init_for_input(&self, dir: &Path, files: &CheckpointFiles) -> Result<Option<PathBuf>> {
         let ModelConfig::PersonMinkunet(ours) = &self.cfg.model else { return Ok(None) };
         let theirs = RunDir::at(dir).config().with_context(|| format!("train.init = {}", dir.display()))?;

@@ -74,20 +74,16 @@ impl PersonMinkUNet {
         let m = batch.num_voxels();
         let values = match features {
             InputFeatures::Xyz => batch.features.clone(),
-            InputFeatures::XyzLocal => (0..m)
-                .flat_map(|row| {
+            InputFeatures::XyzLocal | InputFeatures::RangeHeight => {
+                let mut values = Vec::with_capacity(m * features.channels());
+                for row in 0..m {
                     let (p, c) = (batch.point(row), batch.centre(row));
                     let local = [0, 1, 2].map(|k| (p[k] - c[k]) / batch.voxel_size[k]);
-                    [p[0], p[1], p[2], local[0], local[1], local[2]]
-                })
-                .collect(),
-            InputFeatures::RangeHeight => (0..m)
-                .flat_map(|row| {
-                    let (p, c) = (batch.point(row), batch.centre(row));
-                    let local = [0, 1, 2].map(|k| (p[k] - c[k]) / batch.voxel_size[k]);
-                    [p[0].hypot(p[1]), p[2], local[0], local[1], local[2]]
-                })
-                .collect(),
+                    let global = if features == InputFeatures::XyzLocal { &p[..] } else { &[p[0].hypot(p[1]), p[2]][..] };
+                    values.extend(global.iter().copied().chain(local));
+                }
+                values
+            }
         };
         let features = Tensor::<2>::from_data(TensorData::new(values, [m, features.channels()]), device);
         SparseTensor::new(features, batch.coords.clone()).expect("a collated batch has unique, in-range voxels")
