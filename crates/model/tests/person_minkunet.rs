@@ -4,7 +4,8 @@
 mod common;
 
 use common::{ap03, head_tail, sim_batch, train, valid_gt};
-use model::person_minkunet::{HeadingEncoding, InputFeatures};
+use data_jrdb::Batch;
+use model::person_minkunet::{HeadingEncoding, InputFeatures, Symmetry};
 use model::{Detector, LossTerms, PersonMinkUNet, PersonMinkUNetConfig};
 use sparse_conv::burn::module::Module;
 use sparse_conv::burn::tensor::Device;
@@ -69,6 +70,58 @@ fn weights_carried_to_a_wider_input_compute_the_same_boxes() {
     // Back to xyz: the same weights as at the start.
     let back = carried.with_input(InputFeatures::Xyz).head_output(&batch, &device);
     assert!(before.iter().zip(&back).all(|(a, b)| (a - b).abs() < 1e-4));
+}
+
+/// `batch` turned by 90° about the lattice's turn centre: voxel (i, j) → (−j − 1, i), its point and
+/// centre turned about the centre, the rows in the same order.
+fn turned(batch: &Batch) -> Batch {
+    let [cx, cy] = PersonMinkUNet::turn_centre(batch.voxel_size);
+    let turn = |xy: &mut [f32]| (xy[0], xy[1]) = (cx - (xy[1] - cy), cy + (xy[0] - cx));
+    let mut out = batch.clone();
+    out.coords.iter_mut().for_each(|c| *c = [c[0], -c[2] - 1, c[1], c[3]]);
+    out.features.chunks_mut(3).for_each(turn);
+    out.centres.chunks_mut(3).for_each(turn);
+    out
+}
+
+#[test]
+fn quarter_turn_symmetry_turns_the_boxes_with_the_cloud() {
+    // With quarter-turn symmetry, the head's output on a turned cloud is its output on the cloud,
+    // turned (offsets as vectors, the heading by whole bins), for every input and heading
+    // encoding, after a few training steps have moved the weights and the norms' running
+    // statistics away from their start. Without it the answers differ.
+    let batch = sim_batch("turns", 1, 8, 10.0, 5);
+    let device = Device::flex();
+    let worst = |cfg: &PersonMinkUNetConfig| {
+        let ad = Device::flex().autodiff();
+        let model = common::initialised(&ad, Some(7), || cfg.init(&ad));
+        let (model, _) = train(model, &batch, &ad, 3, 1e-2);
+        let model = model.valid();
+        let (a, b) = (model.head_output(&batch, &device), model.head_output(&turned(&batch), &device));
+        let expected = model.head_turn().apply(&a);
+        assert_eq!(expected.len(), b.len());
+        let scale = a.iter().fold(0f32, |m, v| m.max(v.abs()));
+        expected.iter().zip(&b).map(|(e, b)| (e - b).abs()).fold(0f32, f32::max) / scale
+    };
+    for (input, heading) in
+        [(InputFeatures::Xyz, HeadingEncoding::AxisFacing), (InputFeatures::XyzLocal, HeadingEncoding::Bins), (InputFeatures::RangeHeight, HeadingEncoding::SinCos)]
+    {
+        let cfg = PersonMinkUNetConfig { symmetry: Symmetry::QuarterTurns, input, in_channels: input.channels(), heading, ..small() };
+        let w = worst(&cfg);
+        assert!(w < 1e-5, "{input:?} / {heading:?}: the turned cloud's output is off by {w} of the output's scale");
+    }
+    let plain = PersonMinkUNetConfig { heading: HeadingEncoding::AxisFacing, ..small() };
+    assert!(worst(&plain) > 1e-2, "without symmetry a turn changes the answer");
+}
+
+#[test]
+fn quarter_turn_symmetry_refuses_channels_it_cannot_split() {
+    let turned = PersonMinkUNetConfig { symmetry: Symmetry::QuarterTurns, ..small() };
+    assert!(turned.validate().is_ok());
+    let narrow = PersonMinkUNetConfig { width: 0.2, ..turned.clone() };
+    assert!(narrow.validate().unwrap_err().contains("divisible by 4"), "{:?}", narrow.validate());
+    let bins = PersonMinkUNetConfig { num_bins: 10, ..turned };
+    assert!(bins.validate().unwrap_err().contains("whole heading bins"), "{:?}", bins.validate());
 }
 
 #[test]

@@ -140,7 +140,7 @@ fn inference_uses_the_running_statistics() {
         }
         let x = tensor2(&features(5), [ROWS, C], &t.device, t.dtype);
         let residual = tensor2(&random_values(&mut rng(9), ROWS * C), [ROWS, C], &t.device, t.dtype);
-        let reference = sparse_conv::modules::SparseBatchNorm { inner: burns };
+        let reference = sparse_conv::modules::SparseBatchNorm { inner: burns, copies: 1 };
         for after in AFTER {
             let expected = values(apply(&reference, x.clone(), residual.clone(), after, false));
             let actual = values(apply(&ours, x.clone(), residual.clone(), after, true));

@@ -73,7 +73,7 @@ fn residual_block_evaluates_as_its_layers_one_by_one() {
             inner.running_var = RunningState::new(var);
             inner.gamma = inner.gamma.clone().map(|_| gamma);
             inner.beta = inner.beta.clone().map(|_| beta);
-            SparseBatchNorm { inner }
+            SparseBatchNorm { inner, copies: 1 }
         };
         let mut block = block.clone();
         block.norm1 = set(&block.norm1, 1);

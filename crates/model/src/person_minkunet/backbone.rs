@@ -1,8 +1,9 @@
 //! The MinkUNet backbone of Person-MinkUNet (the SPVNAS layout of the authors' `nets/minkunet.py`).
 
 use burn::module::Module;
-use burn::tensor::Device;
+use burn::tensor::{Device, Tensor};
 use sparse_conv::{Epilogue, SparseTensor};
+use sparse_conv::modules::turns::{FieldTurn, TURNS, TiedKernel};
 use sparse_conv::modules::{
     ConvBnRelu, ConvBnReluConfig, DeconvBnRelu, DeconvBnReluConfig, ResidualBlock, ResidualBlockConfig, SparseBatchNorm,
     SparseBatchNormConfig, SubmanifoldConv3d, SubmanifoldConv3dConfig,
@@ -18,11 +19,14 @@ pub struct MinkUNetConfig {
     pub channels: Vec<usize>,
     /// Width factor on every entry of `channels`.
     pub width: f64,
+    /// With quarter-turn symmetry: how the input channels turn. Every layer then holds four
+    /// orientation copies of a quarter of its channels (`sparse_conv::modules::turns`).
+    pub input_turn: Option<FieldTurn>,
 }
 
 impl Default for MinkUNetConfig {
     fn default() -> Self {
-        Self { in_channels: 3, channels: vec![32, 32, 64, 128, 256, 256, 128, 96, 96], width: 1.0 }
+        Self { in_channels: 3, channels: vec![32, 32, 64, 128, 256, 256, 128, 96, 96], width: 1.0, input_turn: None }
     }
 }
 
@@ -51,17 +55,30 @@ impl MinkUNetConfig {
         );
         let cs = self.scaled_channels();
         let n = self.stages();
-        let stem = [
-            SubmanifoldConv3dConfig::new([self.in_channels, cs[0]]).init(device),
-            SubmanifoldConv3dConfig::new([cs[0], cs[0]]).init(device),
-        ];
-        let stem_norms = [SparseBatchNormConfig::new(cs[0]).init(device), SparseBatchNormConfig::new(cs[0]).init(device)];
+        let turns = self.input_turn.is_some();
+        let copies = if turns { TURNS } else { 1 };
+        let stem = match &self.input_turn {
+            Some(input) => {
+                assert!(cs[0] % TURNS == 0, "stem channels {} do not split into {TURNS} orientation copies", cs[0]);
+                let c = cs[0] / TURNS;
+                [
+                    SubmanifoldConv3dConfig::new([self.in_channels, cs[0]]).init_tied(TiedKernel::lifting(3, input, c), device),
+                    SubmanifoldConv3dConfig::new([cs[0], cs[0]]).init_tied(TiedKernel::regular(3, c, c), device),
+                ]
+            }
+            None => [
+                SubmanifoldConv3dConfig::new([self.in_channels, cs[0]]).init(device),
+                SubmanifoldConv3dConfig::new([cs[0], cs[0]]).init(device),
+            ],
+        };
+        let norm = || SparseBatchNormConfig::new(cs[0]).with_copies(copies).init(device);
+        let stem_norms = [norm(), norm()];
         let down = (1..=n)
             .map(|i| DownStage {
-                conv: ConvBnReluConfig::new([cs[i - 1], cs[i - 1]]).init(device),
+                conv: ConvBnReluConfig::new([cs[i - 1], cs[i - 1]]).with_turns(turns).init(device),
                 blocks: vec![
-                    ResidualBlockConfig::new([cs[i - 1], cs[i]]).init(device),
-                    ResidualBlockConfig::new([cs[i], cs[i]]).init(device),
+                    ResidualBlockConfig::new([cs[i - 1], cs[i]]).with_turns(turns).init(device),
+                    ResidualBlockConfig::new([cs[i], cs[i]]).with_turns(turns).init(device),
                 ],
             })
             .collect();
@@ -69,15 +86,15 @@ impl MinkUNetConfig {
             .map(|j| {
                 let (prev, out, skip) = (cs[n + j], cs[n + 1 + j], cs[n - 1 - j]);
                 UpStage {
-                    deconv: DeconvBnReluConfig::new([prev, out]).init(device),
+                    deconv: DeconvBnReluConfig::new([prev, out]).with_turns(turns).init(device),
                     blocks: vec![
-                        ResidualBlockConfig::new([out + skip, out]).init(device),
-                        ResidualBlockConfig::new([out, out]).init(device),
+                        ResidualBlockConfig::new([out + skip, out]).with_turns(turns).init(device),
+                        ResidualBlockConfig::new([out, out]).with_turns(turns).init(device),
                     ],
                 }
             })
             .collect();
-        MinkUNet { stem: stem.into(), stem_norms: stem_norms.into(), down, up }
+        MinkUNet { stem: stem.into(), stem_norms: stem_norms.into(), down, up, copies }
     }
 }
 
@@ -110,6 +127,9 @@ pub struct MinkUNet {
     pub down: Vec<DownStage>,
     /// Decoder stages, coarsest first.
     pub up: Vec<UpStage>,
+    /// Orientation copies every layer's channels hold (4 with quarter-turn symmetry, else 1).
+    #[module(skip)]
+    pub copies: usize,
 }
 
 /// Every level a forward pass went through: `down[0]` is the stem output (stride 1), `down[i]`
@@ -153,8 +173,9 @@ impl MinkUNet {
         let n = down.len();
         for (j, stage) in self.up.iter().enumerate() {
             let below = up.last().unwrap_or(&down[n - 1]).clone();
-            // Concatenation order is [upsampled, skip] (as in the authors' `minkunet.py`).
-            let mut y = stage.deconv.forward(below).cat(&down[n - 2 - j]);
+            // Concatenation order is [upsampled, skip] (as in the authors' `minkunet.py`), within
+            // each orientation copy.
+            let mut y = concat(stage.deconv.forward(below), &down[n - 2 - j], self.copies);
             for block in &stage.blocks {
                 y = block.forward(y);
             }
@@ -162,4 +183,16 @@ impl MinkUNet {
         }
         UNetLevels { down, up }
     }
+}
+
+/// `[a, b]` channels, within each of `copies` orientation copies (orientation-major).
+fn concat(a: SparseTensor, b: &SparseTensor, copies: usize) -> SparseTensor {
+    if copies == 1 {
+        return a.cat(b);
+    }
+    let (rows, ca, cb) = (a.num_voxels(), a.channels(), b.channels());
+    assert!(a.stride() == b.stride() && b.num_voxels() == rows, "sparse concatenation needs identical coordinates");
+    let split = |t: SparseTensor, c: usize| t.into_features().reshape([rows, copies, c / copies]);
+    let features = Tensor::cat(vec![split(a.clone(), ca), split(b.clone(), cb)], 2).reshape([rows, ca + cb]);
+    a.with_features(features)
 }

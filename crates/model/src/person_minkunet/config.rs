@@ -2,6 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 use sparse_conv::burn::tensor::Device;
+use sparse_conv::modules::turns::FieldTurn;
 
 use super::PersonMinkUNet;
 use super::backbone::MinkUNetConfig;
@@ -52,6 +53,35 @@ impl InputFeatures {
     pub fn channels(self) -> usize {
         self.channel_names().len()
     }
+
+    /// How the channels change when the cloud turns by 90° about z: x, y and dx, dy as vectors,
+    /// the rest unchanged.
+    pub fn turn(self) -> FieldTurn {
+        let names = self.channel_names();
+        let at = |name: &str| names.iter().position(|n| *n == name);
+        let mut turn = FieldTurn::scalars(names.len());
+        for (x, y) in [("x", "y"), ("dx", "dy")] {
+            if let (Some(x), Some(y)) = (at(x), at(y)) {
+                turn = turn.with_vector(x, y);
+            }
+        }
+        turn
+    }
+}
+
+/// Which turns of the cloud the network answers alike by construction.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum Symmetry {
+    /// None built in (the authors'): rotations are learned from augmentation.
+    #[default]
+    None,
+    /// Quarter turns about the vertical axis: every layer holds four orientation copies of a
+    /// quarter of its channels with weights tied across the turns (a p4 group convolution,
+    /// `sparse_conv::modules::turns`), so a cloud turned by 90° gets its boxes turned by 90°
+    /// (exactly on the voxel lattice, about the corner half a voxel from the sensor's axis).
+    /// The same multiply-adds as `None` at the same width, a quarter of the weights.
+    QuarterTurns,
 }
 
 /// Person-MinkUNet: MinkUNet backbone, per-voxel head, targets, loss and decoding (docs/model.md).
@@ -96,6 +126,8 @@ pub struct PersonMinkUNetConfig {
     pub sin_cos_weight: f64,
     /// Weight of the facing BCE with `heading = "axis_facing"` (1).
     pub facing_weight: f64,
+    /// Turns the network answers alike by construction (`"none"`, the authors'; `"quarter_turns"`).
+    pub symmetry: Symmetry,
     /// Post-processing of the per-voxel boxes.
     pub post: PostProcessConfig,
 }
@@ -120,13 +152,15 @@ impl Default for PersonMinkUNetConfig {
             residual_weight: 0.01,
             sin_cos_weight: 1.0,
             facing_weight: 1.0,
+            symmetry: Symmetry::None,
             post: PostProcessConfig::default(),
         }
     }
 }
 
 impl PersonMinkUNetConfig {
-    /// Checks what serde cannot: the input features fill `in_channels`.
+    /// Checks what serde cannot: the input features fill `in_channels`; with quarter turns, every
+    /// layer's channels split into four copies and a quarter turn moves the heading by whole bins.
     pub fn validate(&self) -> Result<(), String> {
         if self.in_channels != self.input.channels() {
             return Err(format!(
@@ -136,12 +170,32 @@ impl PersonMinkUNetConfig {
                 self.input.channels()
             ));
         }
+        if self.symmetry == Symmetry::QuarterTurns {
+            let channels = self.backbone().scaled_channels();
+            if let Some(c) = channels.iter().find(|&&c| c % 4 != 0) {
+                return Err(format!(
+                    "model.symmetry = \"quarter_turns\" needs every layer's channels (model.channels × model.width = {channels:?}) divisible by 4; {c} is not"
+                ));
+            }
+            let quarter = match self.heading {
+                HeadingEncoding::Bins => self.num_bins % 4 == 0,
+                HeadingEncoding::AxisFacing => self.num_bins % 2 == 0,
+                HeadingEncoding::SinCos => true,
+            };
+            if !quarter && self.box_frame == BoxFrame::Base {
+                return Err(format!(
+                    "model.symmetry = \"quarter_turns\" needs a quarter turn to be whole heading bins: model.num_bins = {} with model.heading = {:?}",
+                    self.num_bins, self.heading
+                ));
+            }
+        }
         Ok(())
     }
 
     /// The backbone's configuration.
     pub fn backbone(&self) -> MinkUNetConfig {
-        MinkUNetConfig { in_channels: self.in_channels, channels: self.channels.clone(), width: self.width }
+        let input_turn = (self.symmetry == Symmetry::QuarterTurns).then(|| self.input.turn());
+        MinkUNetConfig { in_channels: self.in_channels, channels: self.channels.clone(), width: self.width, input_turn }
     }
 
     /// A model with freshly initialised parameters on `device`.

@@ -16,17 +16,20 @@ pub mod targets;
 
 pub use backbone::{MinkUNet, MinkUNetConfig, UNetLevels};
 pub use box_coder::{BoxCoder, BoxFrame, HeadingEncoding};
-pub use config::{InputFeatures, PersonMinkUNetConfig, TargetVariant};
+pub use config::{InputFeatures, PersonMinkUNetConfig, Symmetry, TargetVariant};
 
 use data_jrdb::Batch;
-use sparse_conv::SparseTensor;
+use std::sync::Arc;
+
 use sparse_conv::modules::per_voxel_linear;
+use sparse_conv::modules::turns::{FieldTurn, TURNS, TiedKernel, pooled_bias};
+use sparse_conv::{SparseTensor, sparse_conv};
 use sparse_conv::burn::module::{Module, Param};
 use sparse_conv::burn::nn::{Linear, LinearConfig};
 use sparse_conv::burn::tensor::{Device, Tensor, TensorData};
 
 use crate::detector::{Detections, Detector, LossTerms};
-use box_coder::head_channels;
+use box_coder::{BINS, OFFSET, head_channels};
 use decode::decode;
 use loss::{LossWeights, loss};
 use targets::assign;
@@ -37,6 +40,8 @@ pub struct PersonMinkUNet {
     /// Sparse U-Net, features on every input voxel.
     pub backbone: MinkUNet,
     /// Per-voxel classifier, `nn.Linear(96·cr, 2·bins + 7)` with bias, PyTorch's default init.
+    /// With quarter-turn symmetry it reads one orientation copy (`96·cr / 4` channels) and the
+    /// four copies' outputs, turned back, are averaged ([`Self::forward`]).
     pub head: Linear,
     /// The configuration it was built from (targets, loss weights, post-processing).
     #[module(skip)]
@@ -48,11 +53,39 @@ impl PersonMinkUNet {
     pub fn new(config: &PersonMinkUNetConfig, device: &Device) -> Self {
         let backbone_cfg = config.backbone();
         let channels = head_channels(config.num_bins, config.heading);
+        let copies = if config.symmetry == Symmetry::QuarterTurns { TURNS } else { 1 };
         PersonMinkUNet {
             backbone: backbone_cfg.init(device),
-            head: LinearConfig::new(backbone_cfg.out_channels(), channels).init(device),
+            head: LinearConfig::new(backbone_cfg.out_channels() / copies, channels).init(device),
             config: config.clone(),
         }
+    }
+
+    /// How the head's channels change when the cloud turns by 90°: in the base frame the centre
+    /// offset turns as a vector and the heading moves by a quarter turn (whole bins, or its sine
+    /// and cosine as a vector); in the ray frame nothing changes.
+    pub fn head_turn(&self) -> FieldTurn {
+        let c = &self.config;
+        let turn = FieldTurn::scalars(head_channels(c.num_bins, c.heading));
+        if c.box_frame == BoxFrame::Ray {
+            return turn;
+        }
+        let turn = turn.with_vector(OFFSET, OFFSET + 1);
+        let bins = |shift: usize| turn.clone().with_cycle(BINS, c.num_bins, shift).with_cycle(BINS + c.num_bins, c.num_bins, shift);
+        match c.heading {
+            HeadingEncoding::Bins => bins(c.num_bins / 4),
+            HeadingEncoding::AxisFacing => bins(c.num_bins / 2),
+            // Channels [7] and [8] are sin θ and cos θ: (cos, sin) turns as a vector.
+            HeadingEncoding::SinCos => turn.clone().with_vector(BINS + 1, BINS),
+        }
+    }
+
+    /// Where the lattice's quarter turns are centred for `voxel_size`, metres in x and y: the
+    /// corner half a voxel below the origin's voxel centre, which every level's cells share
+    /// (`sparse_conv::modules::turns`). With quarter-turn symmetry the raw x, y fed to the network
+    /// are taken about it.
+    pub fn turn_centre(voxel_size: [f32; 3]) -> [f32; 2] {
+        [-voxel_size[0] / 2.0, -voxel_size[1] / 2.0]
     }
 
     /// The box coder of the config.
@@ -71,16 +104,26 @@ impl PersonMinkUNet {
     /// # Panics
     /// If the batch's coordinates repeat a voxel (a collated batch never does).
     pub fn input(batch: &Batch, features: InputFeatures, device: &Device) -> SparseTensor {
+        Self::input_about(batch, features, [0.0, 0.0], device)
+    }
+
+    /// [`Self::input`] with the raw x and y (and the range) taken about `centre` instead of the
+    /// origin.
+    pub fn input_about(batch: &Batch, features: InputFeatures, centre: [f32; 2], device: &Device) -> SparseTensor {
         let m = batch.num_voxels();
         let values = match features {
-            InputFeatures::Xyz => batch.features.clone(),
-            InputFeatures::XyzLocal | InputFeatures::RangeHeight => {
+            InputFeatures::Xyz if centre == [0.0, 0.0] => batch.features.clone(),
+            _ => {
                 let mut values = Vec::with_capacity(m * features.channels());
                 for row in 0..m {
                     let (p, c) = (batch.point(row), batch.centre(row));
                     let local = [0, 1, 2].map(|k| (p[k] - c[k]) / batch.voxel_size[k]);
-                    let global = if features == InputFeatures::XyzLocal { &p[..] } else { &[p[0].hypot(p[1]), p[2]][..] };
-                    values.extend(global.iter().copied().chain(local));
+                    let q = [p[0] - centre[0], p[1] - centre[1], p[2]];
+                    match features {
+                        InputFeatures::Xyz => values.extend(q),
+                        InputFeatures::XyzLocal => values.extend(q.into_iter().chain(local)),
+                        InputFeatures::RangeHeight => values.extend([q[0].hypot(q[1]), q[2]].into_iter().chain(local)),
+                    }
                 }
                 values
             }
@@ -106,6 +149,9 @@ impl PersonMinkUNet {
             })
             .collect();
         self.backbone.stem[0].weight = Param::from_tensor(Tensor::cat(columns, 1));
+        if self.config.symmetry == Symmetry::QuarterTurns {
+            self.backbone.stem[0].tied = Some(Arc::new(TiedKernel::lifting(3, &input.turn(), c_out)));
+        }
         self.config.input = input;
         self.config.in_channels = input.channels();
         self
@@ -113,8 +159,26 @@ impl PersonMinkUNet {
 
     /// Head output for every voxel of the batch, `[M, coder().channels()]` (layout in [`box_coder`]).
     pub fn forward(&self, batch: &Batch, device: &Device) -> Tensor<2> {
-        let x = self.backbone.forward(Self::input(batch, self.config.input, device));
-        per_voxel_linear(&self.head, &x)
+        if self.config.symmetry == Symmetry::None {
+            let x = self.backbone.forward(Self::input(batch, self.config.input, device));
+            return per_voxel_linear(&self.head, &x);
+        }
+        assert_eq!(
+            batch.voxel_size[0], batch.voxel_size[1],
+            "model.symmetry = \"quarter_turns\" needs square voxels in x and y, got {:?}",
+            batch.voxel_size
+        );
+        let input = Self::input_about(batch, self.config.input, Self::turn_centre(batch.voxel_size), device);
+        let x = self.backbone.forward(input);
+        // The mean over the orientation copies of each copy's output turned forward by its turn.
+        let turn = self.head_turn();
+        let [c, n] = self.head.weight.dims();
+        let weight = TiedKernel::pooling(c, &turn).expand(self.head.weight.val().reshape([1, c, n]));
+        let out = sparse_conv(x.features(), weight, &x.submanifold_map(1));
+        match &self.head.bias {
+            Some(bias) => out + pooled_bias(bias.val(), &turn).unsqueeze_dim(0),
+            None => out,
+        }
     }
 }
 

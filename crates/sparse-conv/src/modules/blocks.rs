@@ -4,6 +4,7 @@ use burn::config::Config;
 use burn::module::Module;
 use burn::tensor::Device;
 
+use super::turns::{TURNS, TiedKernel};
 use super::{
     SparseBatchNorm, SparseBatchNormConfig, SparseConv3d, SparseConv3dConfig, SparseConvTranspose3d,
     SparseConvTranspose3dConfig, SubmanifoldConv3d, SubmanifoldConv3dConfig,
@@ -19,6 +20,10 @@ pub struct ConvBnReluConfig {
     #[config(default = 2)]
     /// Kernel size.
     pub kernel_size: usize,
+    #[config(default = false)]
+    /// Channels hold four orientation copies and the weights are tied across quarter turns
+    /// ([`super::turns`]); `channels` count every copy.
+    pub turns: bool,
 }
 
 /// Down-sampling conv (kernel = stride) → BN → ReLU: `BasicConvolutionBlock(k=2, s=2)`.
@@ -33,9 +38,13 @@ pub struct ConvBnRelu {
 impl ConvBnReluConfig {
     /// A module with fresh parameters on `device`.
     pub fn init(&self, device: &Device) -> ConvBnRelu {
+        let conv = SparseConv3dConfig::new(self.channels).with_kernel_size(self.kernel_size);
         ConvBnRelu {
-            conv: SparseConv3dConfig::new(self.channels).with_kernel_size(self.kernel_size).init(device),
-            norm: SparseBatchNormConfig::new(self.channels[1]).init(device),
+            conv: match self.turns {
+                true => conv.init_tied(regular(self.kernel_size, self.channels), device),
+                false => conv.init(device),
+            },
+            norm: norm(self.channels[1], self.turns, device),
         }
     }
 }
@@ -55,6 +64,10 @@ pub struct DeconvBnReluConfig {
     #[config(default = 2)]
     /// Kernel size.
     pub kernel_size: usize,
+    #[config(default = false)]
+    /// Channels hold four orientation copies and the weights are tied across quarter turns
+    /// ([`super::turns`]); `channels` count every copy.
+    pub turns: bool,
 }
 
 /// Transposed conv → BN → ReLU: `BasicDeconvolutionBlock(k=2, s=2)`.
@@ -69,9 +82,13 @@ pub struct DeconvBnRelu {
 impl DeconvBnReluConfig {
     /// A module with fresh parameters on `device`.
     pub fn init(&self, device: &Device) -> DeconvBnRelu {
+        let conv = SparseConvTranspose3dConfig::new(self.channels).with_kernel_size(self.kernel_size);
         DeconvBnRelu {
-            conv: SparseConvTranspose3dConfig::new(self.channels).with_kernel_size(self.kernel_size).init(device),
-            norm: SparseBatchNormConfig::new(self.channels[1]).init(device),
+            conv: match self.turns {
+                true => conv.init_tied(regular(self.kernel_size, self.channels), device),
+                false => conv.init(device),
+            },
+            norm: norm(self.channels[1], self.turns, device),
         }
     }
 }
@@ -91,6 +108,10 @@ pub struct ResidualBlockConfig {
     #[config(default = 3)]
     /// Kernel size.
     pub kernel_size: usize,
+    #[config(default = false)]
+    /// Channels hold four orientation copies and the weights are tied across quarter turns
+    /// ([`super::turns`]); `channels` count every copy.
+    pub turns: bool,
 }
 
 /// `relu([conv → BN → ReLU → conv → BN](x) + shortcut(x))`; the shortcut is the identity when
@@ -123,15 +144,19 @@ impl ResidualBlockConfig {
     pub fn init(&self, device: &Device) -> ResidualBlock {
         let [c_in, c_out] = self.channels;
         let k = self.kernel_size;
+        let conv = |channels: [usize; 2], kernel: usize| {
+            let config = SubmanifoldConv3dConfig::new(channels).with_kernel_size(kernel);
+            match self.turns {
+                true => config.init_tied(regular(kernel, channels), device),
+                false => config.init(device),
+            }
+        };
         ResidualBlock {
-            conv1: SubmanifoldConv3dConfig::new([c_in, c_out]).with_kernel_size(k).init(device),
-            norm1: SparseBatchNormConfig::new(c_out).init(device),
-            conv2: SubmanifoldConv3dConfig::new([c_out, c_out]).with_kernel_size(k).init(device),
-            norm2: SparseBatchNormConfig::new(c_out).init(device),
-            shortcut: (c_in != c_out).then(|| Shortcut {
-                conv: SubmanifoldConv3dConfig::new([c_in, c_out]).with_kernel_size(1).init(device),
-                norm: SparseBatchNormConfig::new(c_out).init(device),
-            }),
+            conv1: conv([c_in, c_out], k),
+            norm1: norm(c_out, self.turns, device),
+            conv2: conv([c_out, c_out], k),
+            norm2: norm(c_out, self.turns, device),
+            shortcut: (c_in != c_out).then(|| Shortcut { conv: conv([c_in, c_out], 1), norm: norm(c_out, self.turns, device) }),
         }
     }
 }
@@ -146,4 +171,15 @@ impl ResidualBlock {
         };
         self.conv2.forward_norm(main, &self.norm2, Epilogue::AddRelu(skip.into_features()))
     }
+}
+
+/// Weights tied across quarter turns between orientation copies of `channels / 4` each.
+fn regular(kernel: usize, [c_in, c_out]: [usize; 2]) -> TiedKernel {
+    assert!(c_in % TURNS == 0 && c_out % TURNS == 0, "channels {c_in} → {c_out} do not split into {TURNS} orientation copies");
+    TiedKernel::regular(kernel, c_in / TURNS, c_out / TURNS)
+}
+
+/// Batch norm of `channels`, shared by the orientation copies when `turns`.
+fn norm(channels: usize, turns: bool, device: &Device) -> SparseBatchNorm {
+    SparseBatchNormConfig::new(channels).with_copies(if turns { TURNS } else { 1 }).init(device)
 }

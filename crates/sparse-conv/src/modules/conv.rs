@@ -8,6 +8,7 @@ use burn::nn::Initializer;
 use burn::tensor::{Device, Tensor};
 
 use super::SparseBatchNorm;
+use super::turns::TiedKernel;
 use crate::SparseTensor;
 use crate::ops::batch_norm::Epilogue;
 use crate::geometry::kernel_map::KernelMap;
@@ -16,6 +17,21 @@ use crate::ops::conv::sparse_conv;
 /// `U(±bound)` for a `[K, C_in, C_out]` weight.
 fn uniform_weight(volume: usize, c_in: usize, c_out: usize, bound: f64, device: &Device) -> Param<Tensor<3>> {
     Initializer::Uniform { min: -bound, max: bound }.init([volume, c_in, c_out], device)
+}
+
+/// Free weights `U(±bound)` for `tied`, which must build a `[volume, c_in, c_out]` kernel.
+fn tied_weight(tied: &TiedKernel, volume: usize, c_in: usize, c_out: usize, bound: f64, device: &Device) -> Param<Tensor<3>> {
+    assert_eq!(tied.full_shape(), [volume, c_in, c_out], "tied kernel of another shape than the convolution's");
+    let [k, i, o] = tied.free_shape();
+    uniform_weight(k, i, o, bound, device)
+}
+
+/// The weights a convolution runs with: its own, or those `tied` builds from them.
+fn full_weight(weight: &Param<Tensor<3>>, tied: &Option<Arc<TiedKernel>>) -> Tensor<3> {
+    match tied {
+        Some(tied) => tied.expand(weight.val()),
+        None => weight.val(),
+    }
 }
 
 /// Configuration of a [`SubmanifoldConv3d`].
@@ -35,6 +51,9 @@ pub struct SubmanifoldConv3d {
     pub weight: Param<Tensor<3>>,
     /// Kernel size.
     pub kernel_size: usize,
+    /// Ties `weight` across quarter turns: `weight` holds the free weights.
+    #[module(skip)]
+    pub tied: Option<Arc<TiedKernel>>,
 }
 
 impl SubmanifoldConv3dConfig {
@@ -44,7 +63,17 @@ impl SubmanifoldConv3dConfig {
         let [c_in, c_out] = self.channels;
         let volume = self.kernel_size.pow(3);
         let bound = 1.0 / ((c_in * volume) as f64).sqrt();
-        SubmanifoldConv3d { weight: uniform_weight(volume, c_in, c_out, bound, device), kernel_size: self.kernel_size }
+        SubmanifoldConv3d { weight: uniform_weight(volume, c_in, c_out, bound, device), kernel_size: self.kernel_size, tied: None }
+    }
+
+    /// The same convolution with its weights tied by `tied` (the free weights drawn with the
+    /// same bound).
+    pub fn init_tied(&self, tied: TiedKernel, device: &Device) -> SubmanifoldConv3d {
+        let [c_in, c_out] = self.channels;
+        let volume = self.kernel_size.pow(3);
+        let bound = 1.0 / ((c_in * volume) as f64).sqrt();
+        let weight = tied_weight(&tied, volume, c_in, c_out, bound, device);
+        SubmanifoldConv3d { weight, kernel_size: self.kernel_size, tied: Some(Arc::new(tied)) }
     }
 }
 
@@ -73,7 +102,7 @@ impl SubmanifoldConv3d {
         // identity pairs, built in O(N)): the op's GEMM and weight-gradient kernels are several
         // times faster than the backends' matmul on these tall, thin products.
         let map = x.submanifold_map(self.kernel_size);
-        let features = op(x.features(), self.weight.val(), &map);
+        let features = op(x.features(), full_weight(&self.weight, &self.tied), &map);
         x.with_features(features)
     }
 }
@@ -95,6 +124,9 @@ pub struct SparseConv3d {
     pub weight: Param<Tensor<3>>,
     /// Kernel size.
     pub kernel_size: usize,
+    /// Ties `weight` across quarter turns: `weight` holds the free weights.
+    #[module(skip)]
+    pub tied: Option<Arc<TiedKernel>>,
 }
 
 impl SparseConv3dConfig {
@@ -103,7 +135,17 @@ impl SparseConv3dConfig {
         let [c_in, c_out] = self.channels;
         let volume = self.kernel_size.pow(3);
         let bound = 1.0 / ((c_in * volume) as f64).sqrt();
-        SparseConv3d { weight: uniform_weight(volume, c_in, c_out, bound, device), kernel_size: self.kernel_size }
+        SparseConv3d { weight: uniform_weight(volume, c_in, c_out, bound, device), kernel_size: self.kernel_size, tied: None }
+    }
+
+    /// The same convolution with its weights tied by `tied` (the free weights drawn with the
+    /// same bound).
+    pub fn init_tied(&self, tied: TiedKernel, device: &Device) -> SparseConv3d {
+        let [c_in, c_out] = self.channels;
+        let volume = self.kernel_size.pow(3);
+        let bound = 1.0 / ((c_in * volume) as f64).sqrt();
+        let weight = tied_weight(&tied, volume, c_in, c_out, bound, device);
+        SparseConv3d { weight, kernel_size: self.kernel_size, tied: Some(Arc::new(tied)) }
     }
 }
 
@@ -120,7 +162,7 @@ impl SparseConv3d {
 
     fn run(&self, x: SparseTensor, op: ConvOp<'_>) -> SparseTensor {
         let (map, coords) = x.down_map(self.kernel_size);
-        let features = op(x.features(), self.weight.val(), &map);
+        let features = op(x.features(), full_weight(&self.weight, &self.tied), &map);
         x.on_level(features, coords, x.stride() * self.kernel_size as i32)
     }
 }
@@ -143,6 +185,9 @@ pub struct SparseConvTranspose3d {
     pub weight: Param<Tensor<3>>,
     /// Kernel size.
     pub kernel_size: usize,
+    /// Ties `weight` across quarter turns: `weight` holds the free weights.
+    #[module(skip)]
+    pub tied: Option<Arc<TiedKernel>>,
 }
 
 impl SparseConvTranspose3dConfig {
@@ -151,7 +196,17 @@ impl SparseConvTranspose3dConfig {
         let [c_in, c_out] = self.channels;
         let volume = self.kernel_size.pow(3);
         let bound = 1.0 / (c_out as f64).sqrt();
-        SparseConvTranspose3d { weight: uniform_weight(volume, c_in, c_out, bound, device), kernel_size: self.kernel_size }
+        SparseConvTranspose3d { weight: uniform_weight(volume, c_in, c_out, bound, device), kernel_size: self.kernel_size, tied: None }
+    }
+
+    /// The same convolution with its weights tied by `tied` (the free weights drawn with the
+    /// same bound).
+    pub fn init_tied(&self, tied: TiedKernel, device: &Device) -> SparseConvTranspose3d {
+        let [c_in, c_out] = self.channels;
+        let volume = self.kernel_size.pow(3);
+        let bound = 1.0 / (c_out as f64).sqrt();
+        let weight = tied_weight(&tied, volume, c_in, c_out, bound, device);
+        SparseConvTranspose3d { weight, kernel_size: self.kernel_size, tied: Some(Arc::new(tied)) }
     }
 }
 
@@ -168,7 +223,7 @@ impl SparseConvTranspose3d {
 
     fn run(&self, x: SparseTensor, op: ConvOp<'_>) -> SparseTensor {
         let (map, coords, fine) = x.up_map(self.kernel_size);
-        let features = op(x.features(), self.weight.val(), &map);
+        let features = op(x.features(), full_weight(&self.weight, &self.tied), &map);
         x.on_level(features, coords, fine)
     }
 }

@@ -5,6 +5,7 @@ mod blocks;
 mod conv;
 mod linear;
 mod norm;
+pub mod turns;
 
 pub use blocks::{ConvBnRelu, ConvBnReluConfig, DeconvBnRelu, DeconvBnReluConfig, ResidualBlock, ResidualBlockConfig, Shortcut};
 pub use conv::{

@@ -25,6 +25,11 @@ pub struct SparseBatchNormConfig {
     #[config(default = 0.1)]
     /// Momentum of the running statistics (0.1, PyTorch's convention).
     pub momentum: f64,
+    #[config(default = 1)]
+    /// Orientation copies the channels hold (orientation-major, [`super::turns`]): statistics,
+    /// scale and shift are shared by the copies of a channel, so a turn of the input commutes
+    /// with the norm. 1: plain channels.
+    pub copies: usize,
 }
 
 /// Batch norm with every voxel of the batch as one sample: batch statistics and running-stat
@@ -35,15 +40,20 @@ pub struct SparseBatchNormConfig {
 /// a conv, it runs inside the conv's op ([`Self::after_conv`]).
 #[derive(Module, Debug)]
 pub struct SparseBatchNorm {
-    /// Burn's batch norm: its parameters, running statistics and record.
+    /// Burn's batch norm: its parameters, running statistics and record (one per channel of a
+    /// copy).
     pub inner: BatchNorm,
+    /// Orientation copies sharing `inner` (1: none).
+    #[module(skip)]
+    pub copies: usize,
 }
 
 impl SparseBatchNormConfig {
     /// Weight 1, bias 0.
     pub fn init(&self, device: &Device) -> SparseBatchNorm {
-        let inner = BatchNormConfig::new(self.channels).with_epsilon(self.epsilon).with_momentum(self.momentum).init(device);
-        SparseBatchNorm { inner }
+        assert!(self.copies >= 1 && self.channels % self.copies == 0, "{} channels do not split into {} copies", self.channels, self.copies);
+        let inner = BatchNormConfig::new(self.channels / self.copies).with_epsilon(self.epsilon).with_momentum(self.momentum).init(device);
+        SparseBatchNorm { inner, copies: self.copies }
     }
 }
 
@@ -72,7 +82,9 @@ impl SparseBatchNorm {
         match self.running_stats(&features.device()) {
             Some((mean, var)) => {
                 let bn = &self.inner;
-                sparse_conv_norm_eval(features, weight, map, mean, var, bn.gamma.val(), bn.beta.val(), bn.epsilon, epilogue)
+                let every = |v: Tensor<1>| if self.copies == 1 { v } else { Tensor::cat(vec![v; self.copies], 0) };
+                let (mean, var, gamma, beta) = (every(mean), every(var), every(bn.gamma.val()), every(bn.beta.val()));
+                sparse_conv_norm_eval(features, weight, map, mean, var, gamma, beta, bn.epsilon, epilogue)
             }
             None => self.features(sparse_conv(features, weight, map), epilogue),
         }
@@ -86,6 +98,20 @@ impl SparseBatchNorm {
     }
 
     fn features(&self, x: Tensor<2>, epilogue: Epilogue) -> Tensor<2> {
+        if self.copies == 1 {
+            return self.plain_features(x, epilogue);
+        }
+        // Orientation-major rows of C = copies·c channels are `copies` rows of c channels each.
+        let [rows, total] = x.dims();
+        let per_copy = |t: Tensor<2>| t.reshape([rows * self.copies, total / self.copies]);
+        let epilogue = match epilogue {
+            Epilogue::AddRelu(residual) => Epilogue::AddRelu(per_copy(residual)),
+            other => other,
+        };
+        self.plain_features(per_copy(x), epilogue).reshape([rows, total])
+    }
+
+    fn plain_features(&self, x: Tensor<2>, epilogue: Epilogue) -> Tensor<2> {
         let bn = &self.inner;
         let [rows, channels] = x.dims();
         assert_eq!(channels, bn.gamma.dims()[0], "batch norm of {} channels got features of {channels}", bn.gamma.dims()[0]);
