@@ -150,7 +150,8 @@ impl PersonMinkUNet {
             .collect();
         self.backbone.stem[0].weight = Param::from_tensor(Tensor::cat(columns, 1));
         if self.config.symmetry == Symmetry::QuarterTurns {
-            self.backbone.stem[0].tied = Some(Arc::new(TiedKernel::lifting(3, &input.turn(), c_out)));
+            let kernel = self.backbone.stem[0].kernel_size;
+            self.backbone.stem[0].tied = Some(Arc::new(TiedKernel::lifting(kernel, &input.turn(), c_out)));
         }
         self.config.input = input;
         self.config.in_channels = input.channels();
