@@ -94,9 +94,9 @@ fn a_gpu_tensor_makes_its_coarse_levels_on_the_device() {
     let run = |device: &Device| {
         let ad = device.clone().autodiff();
         let param = |i: usize, k: usize, shape: [usize; 2]| Param::from_tensor(tensor3(&w[i], [k, shape[0], shape[1]], &ad, DType::F32));
-        let down = SparseConv3d { weight: param(0, 8, [c[0], c[1]]), kernel_size: 2 };
-        let coarse_conv = SubmanifoldConv3d { weight: param(1, 27, [c[1], c[1]]), kernel_size: 3 };
-        let up = SparseConvTranspose3d { weight: param(2, 8, [c[1], c[2]]), kernel_size: 2 };
+        let down = SparseConv3d { weight: param(0, 8, [c[0], c[1]]), kernel_size: 2, tied: None };
+        let coarse_conv = SubmanifoldConv3d { weight: param(1, 27, [c[1], c[1]]), kernel_size: 3, tied: None };
+        let up = SparseConvTranspose3d { weight: param(2, 8, [c[1], c[2]]), kernel_size: 2, tied: None };
         let xt = tensor2(&x, [coords.len(), c[0]], &ad, DType::F32).require_grad();
         let input = sparse_conv::SparseTensor::new(xt.clone(), coords.clone()).unwrap();
         let coarse = coarse_conv.forward(down.forward(input.clone()));
