@@ -105,6 +105,13 @@ fn quarter_turn_symmetry_turns_the_boxes_with_the_cloud() {
         expected.iter().zip(&b).map(|(e, b)| (e - b).abs()).fold(0f32, f32::max) / scale
     };
     let worst = |cfg: &PersonMinkUNetConfig| off(&trained(cfg));
+    // Training mode too: batch statistics over the four copies, on the autodiff device.
+    let ad = Device::flex().autodiff();
+    let cfg = PersonMinkUNetConfig { symmetry: Symmetry::QuarterTurns, heading: HeadingEncoding::AxisFacing, ..small() };
+    let model = common::initialised(&ad, Some(7), || cfg.init(&ad));
+    let (a, b) = (model.head_output(&batch, &ad), model.head_output(&turned(&batch), &ad));
+    let training = model.head_turn().apply(&a).iter().zip(&b).map(|(e, b)| (e - b).abs()).fold(0f32, f32::max);
+    assert!(training < 1e-4, "with batch statistics the turned cloud's output is off by {training}");
     for (input, heading) in
         [(InputFeatures::Xyz, HeadingEncoding::AxisFacing), (InputFeatures::XyzLocal, HeadingEncoding::Bins), (InputFeatures::RangeHeight, HeadingEncoding::SinCos)]
     {
@@ -118,6 +125,38 @@ fn quarter_turn_symmetry_turns_the_boxes_with_the_cloud() {
     assert!(carried < 1e-5, "carried to xyz_local: off by {carried}");
     let plain = PersonMinkUNetConfig { heading: HeadingEncoding::AxisFacing, ..small() };
     assert!(worst(&plain) > 1e-2, "without symmetry a turn changes the answer");
+}
+
+#[test]
+fn a_turned_head_row_decodes_to_the_turned_box() {
+    // The head's turn (`head_turn`, which the network's output obeys) agrees with the box coder:
+    // a row turned by it, decoded at the voxel turned about the sensor, is the box turned.
+    use model::person_minkunet::BoxFrame;
+    use rand::{Rng, SeedableRng};
+    let device = Device::flex();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+    for (heading, box_frame) in [
+        (HeadingEncoding::Bins, BoxFrame::Base),
+        (HeadingEncoding::AxisFacing, BoxFrame::Base),
+        (HeadingEncoding::SinCos, BoxFrame::Base),
+        (HeadingEncoding::AxisFacing, BoxFrame::Ray),
+    ] {
+        let model = PersonMinkUNetConfig { symmetry: Symmetry::QuarterTurns, heading, box_frame, ..small() }.init(&device);
+        let (coder, turn) = (model.coder(), model.head_turn());
+        for _ in 0..50 {
+            let row: Vec<f32> = (0..coder.channels()).map(|_| rng.random_range(-1.0..1.0)).collect();
+            let v = [rng.random_range(-9.0..9.0), rng.random_range(-9.0..9.0), rng.random_range(-1.0..1.0)];
+            let a = coder.decode_row(&row, v);
+            let b = coder.decode_row(&turn.apply(&row), [-v[1], v[0], v[2]]);
+            let heading_off = (b.rot_z - a.rot_z - std::f64::consts::FRAC_PI_2).rem_euclid(std::f64::consts::TAU);
+            let close = |x: f64, y: f64| (x - y).abs() < 1e-5;
+            assert!(
+                close(b.cx, -a.cy) && close(b.cy, a.cx) && close(b.cz, a.cz) && close(b.l, a.l) && close(b.w, a.w) && close(b.h, a.h),
+                "{heading:?} {box_frame:?}: {b:?} is not {a:?} turned"
+            );
+            assert!(heading_off.min(std::f64::consts::TAU - heading_off) < 1e-4, "{heading:?} {box_frame:?}: heading {} is not {} + 90°", b.rot_z, a.rot_z);
+        }
+    }
 }
 
 #[test]

@@ -93,6 +93,23 @@ impl SparseTensor {
 
     /// Concatenates the channels of two tensors on identical coordinates: `[self, other]`.
     pub fn cat(&self, other: &SparseTensor) -> Self {
+        self.assert_same_voxels(other);
+        self.with_features(crate::ops::concat::concat_channels(self.features.clone(), other.features.clone()))
+    }
+
+    /// [`Self::cat`] within each of `copies` orientation copies (orientation-major channels,
+    /// [`crate::modules::turns`]): copy r's channels of `self`, then copy r's of `other`.
+    pub fn cat_copies(&self, other: &SparseTensor, copies: usize) -> Self {
+        if copies == 1 {
+            return self.cat(other);
+        }
+        self.assert_same_voxels(other);
+        let (rows, a, b) = (self.num_voxels(), self.channels(), other.channels());
+        let split = |t: &SparseTensor, c: usize| t.features().reshape([rows, copies, c / copies]);
+        self.with_features(Tensor::cat(vec![split(self, a), split(other, b)], 2).reshape([rows, a + b]))
+    }
+
+    fn assert_same_voxels(&self, other: &SparseTensor) {
         assert!(
             self.stride == other.stride
                 && (Arc::ptr_eq(&self.level, &other.level) || self.coords() == other.coords()),
@@ -100,7 +117,6 @@ impl SparseTensor {
             self.stride,
             other.stride
         );
-        self.with_features(crate::ops::concat::concat_channels(self.features.clone(), other.features.clone()))
     }
 
     /// The submanifold map of an odd `kernel` at this level, built once per cache.

@@ -1,7 +1,7 @@
 //! The MinkUNet backbone of Person-MinkUNet (the SPVNAS layout of the authors' `nets/minkunet.py`).
 
 use burn::module::Module;
-use burn::tensor::{Device, Tensor};
+use burn::tensor::Device;
 use sparse_conv::{Epilogue, SparseTensor};
 use sparse_conv::modules::turns::{FieldTurn, TURNS, TiedKernel};
 use sparse_conv::modules::{
@@ -175,7 +175,7 @@ impl MinkUNet {
             let below = up.last().unwrap_or(&down[n - 1]).clone();
             // Concatenation order is [upsampled, skip] (as in the authors' `minkunet.py`), within
             // each orientation copy.
-            let mut y = concat(stage.deconv.forward(below), &down[n - 2 - j], self.copies);
+            let mut y = stage.deconv.forward(below).cat_copies(&down[n - 2 - j], self.copies);
             for block in &stage.blocks {
                 y = block.forward(y);
             }
@@ -185,14 +185,3 @@ impl MinkUNet {
     }
 }
 
-/// `[a, b]` channels, within each of `copies` orientation copies (orientation-major).
-fn concat(a: SparseTensor, b: &SparseTensor, copies: usize) -> SparseTensor {
-    if copies == 1 {
-        return a.cat(b);
-    }
-    let (rows, ca, cb) = (a.num_voxels(), a.channels(), b.channels());
-    assert!(a.stride() == b.stride() && b.num_voxels() == rows, "sparse concatenation needs identical coordinates");
-    let split = |t: SparseTensor, c: usize| t.into_features().reshape([rows, copies, c / copies]);
-    let features = Tensor::cat(vec![split(a.clone(), ca), split(b.clone(), cb)], 2).reshape([rows, ca + cb]);
-    a.with_features(features)
-}

@@ -21,9 +21,9 @@ pub use config::{InputFeatures, PersonMinkUNetConfig, Symmetry, TargetVariant};
 use data_jrdb::Batch;
 use std::sync::Arc;
 
-use sparse_conv::modules::per_voxel_linear;
-use sparse_conv::modules::turns::{FieldTurn, TURNS, TiedKernel, pooled_bias};
-use sparse_conv::{SparseTensor, sparse_conv};
+use sparse_conv::SparseTensor;
+use sparse_conv::modules::turns::{FieldTurn, TURNS, TiedKernel};
+use sparse_conv::modules::{per_voxel_linear, pooled_linear};
 use sparse_conv::burn::module::{Module, Param};
 use sparse_conv::burn::nn::{Linear, LinearConfig};
 use sparse_conv::burn::tensor::{Device, Tensor, TensorData};
@@ -71,6 +71,12 @@ impl PersonMinkUNet {
             return turn;
         }
         let turn = turn.with_vector(OFFSET, OFFSET + 1);
+        let quarter = match c.heading {
+            HeadingEncoding::Bins => c.num_bins % 4,
+            HeadingEncoding::AxisFacing => c.num_bins % 2,
+            HeadingEncoding::SinCos => 0,
+        };
+        assert_eq!(quarter, 0, "a quarter turn is not whole heading bins with {} bins ({:?})", c.num_bins, c.heading);
         let bins = |shift: usize| turn.clone().with_cycle(BINS, c.num_bins, shift).with_cycle(BINS + c.num_bins, c.num_bins, shift);
         match c.heading {
             HeadingEncoding::Bins => bins(c.num_bins / 4),
@@ -170,16 +176,7 @@ impl PersonMinkUNet {
             batch.voxel_size
         );
         let input = Self::input_about(batch, self.config.input, Self::turn_centre(batch.voxel_size), device);
-        let x = self.backbone.forward(input);
-        // The mean over the orientation copies of each copy's output turned forward by its turn.
-        let turn = self.head_turn();
-        let [c, n] = self.head.weight.dims();
-        let weight = TiedKernel::pooling(c, &turn).expand(self.head.weight.val().reshape([1, c, n]));
-        let out = sparse_conv(x.features(), weight, &x.submanifold_map(1));
-        match &self.head.bias {
-            Some(bias) => out + pooled_bias(bias.val(), &turn).unsqueeze_dim(0),
-            None => out,
-        }
+        pooled_linear(&self.head, &self.backbone.forward(input), &self.head_turn())
     }
 }
 

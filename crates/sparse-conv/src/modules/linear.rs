@@ -5,6 +5,7 @@ use burn::module::Module;
 use burn::nn::{Linear, LinearConfig};
 use burn::tensor::{Device, Tensor};
 
+use super::turns::{FieldTurn, TiedKernel, pooled_bias};
 use crate::{SparseTensor, sparse_conv};
 
 /// Configuration of a [`SparseLinear`].
@@ -50,6 +51,20 @@ pub fn per_voxel_linear(linear: &Linear, x: &SparseTensor) -> Tensor<2> {
     let out = sparse_conv(x.features(), linear.weight.val().reshape([1, d_in, d_out]), &map);
     match &linear.bias {
         Some(bias) => out + bias.val().unsqueeze_dim(0),
+        None => out,
+    }
+}
+
+/// `linear` (`[c, n]`) read from each of the four orientation copies of `x` (`4·c` channels,
+/// orientation-major) and the four outputs averaged, each turned forward by its copy's turn as
+/// `output` says: a head whose output turns with the cloud (`super::turns`). Only the part of
+/// the bias that a turn leaves unchanged is added.
+pub fn pooled_linear(linear: &Linear, x: &SparseTensor, output: &FieldTurn) -> Tensor<2> {
+    let [c, n] = linear.weight.dims();
+    let weight = TiedKernel::pooling(c, output).expand(linear.weight.val().reshape([1, c, n]));
+    let out = sparse_conv(x.features(), weight, &x.submanifold_map(1));
+    match &linear.bias {
+        Some(bias) => out + pooled_bias(bias.val(), output).unsqueeze_dim(0),
         None => out,
     }
 }

@@ -12,7 +12,7 @@ pub use conv::{
     SparseConv3d, SparseConv3dConfig, SparseConvTranspose3d, SparseConvTranspose3dConfig, SubmanifoldConv3d,
     SubmanifoldConv3dConfig,
 };
-pub use linear::{SparseLinear, SparseLinearConfig, per_voxel_linear};
+pub use linear::{SparseLinear, SparseLinearConfig, per_voxel_linear, pooled_linear};
 pub use norm::{SparseBatchNorm, SparseBatchNormConfig};
 
 use crate::SparseTensor;

@@ -85,12 +85,19 @@ pub fn turned_offset(size: usize, k: usize, r: usize) -> usize {
 
 /// A convolution's full `[K, C_in, C_out]` weights built from fewer free weights, so that the
 /// convolution commutes with quarter turns: every full entry is a free entry, maybe negated.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Clone, PartialEq)]
 pub struct TiedKernel {
     index: Vec<i64>,
     sign: Option<Vec<f32>>,
     free: [usize; 3],
     full: [usize; 3],
+}
+
+/// The shapes only: the index holds an entry per full weight.
+impl std::fmt::Debug for TiedKernel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("TiedKernel").field("free", &self.free).field("full", &self.full).field("signed", &self.sign.is_some()).finish()
+    }
 }
 
 impl TiedKernel {
