@@ -119,6 +119,11 @@ fn quarter_turn_symmetry_turns_the_boxes_with_the_cloud() {
         let w = worst(&cfg);
         assert!(w < 1e-5, "{input:?} / {heading:?}: the turned cloud's output is off by {w} of the output's scale");
     }
+    // Written out as a plain network (what inference runs), the same function.
+    let model = trained(&cfg);
+    let (tied, plain) = (model.head_output(&batch, &device), model.untied().head_output(&batch, &device));
+    let untied = tied.iter().zip(&plain).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
+    assert!(untied < 1e-4, "the untied network differs by {untied}");
     // Weights carried to another input (`train.init` across inputs) keep the symmetry.
     let cfg = PersonMinkUNetConfig { symmetry: Symmetry::QuarterTurns, ..small() };
     let carried = off(&trained(&cfg).with_input(InputFeatures::XyzLocal));

@@ -67,7 +67,8 @@ impl RunDetector {
             .with_context(|| format!("{} has no `{slot}` checkpoint (--checkpoint latest or best)", run.display()))?;
         let device = config.backend.device()?;
         let model = match &config.model {
-            ModelConfig::PersonMinkunet(c) => Model::PersonMinkunet(files.load_model(c.init(&device))?.valid()),
+            // Quarter-turn ties written out: the same function at a plain network's cost.
+            ModelConfig::PersonMinkunet(c) => Model::PersonMinkunet(files.load_model(c.init(&device))?.valid().untied()),
             ModelConfig::Centerpoint(c) => Model::Centerpoint(files.load_model(c.init(&device))?.valid()),
         };
         let facing = if config.model.post().facing_stage { load_facing(&files.dir)? } else { None };

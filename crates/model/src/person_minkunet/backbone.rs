@@ -143,6 +143,43 @@ pub struct UNetLevels {
 }
 
 impl MinkUNet {
+    /// The same network with its quarter-turn ties written out: plain weights and plain
+    /// concatenations computing the same function, for inference (where the ties only cost
+    /// time). The up stages' first blocks read `[upsampled, skip]` instead of the copies
+    /// interleaved, their input rows reordered to match.
+    pub fn untied(self) -> Self {
+        let copies = self.copies;
+        if copies == 1 {
+            return self;
+        }
+        let untie_all = |blocks: Vec<ResidualBlock>| blocks.into_iter().map(ResidualBlock::untied).collect::<Vec<_>>();
+        let down = self.down.into_iter().map(|s| DownStage { conv: s.conv.untied(), blocks: untie_all(s.blocks) }).collect();
+        let up = self
+            .up
+            .into_iter()
+            .map(|s| {
+                let deconv = s.deconv.untied();
+                let mut blocks = untie_all(s.blocks);
+                let upsampled = deconv.conv.weight.dims()[2];
+                let skip = blocks[0].conv1.weight.dims()[1] - upsampled;
+                let (a, b) = (upsampled / copies, skip / copies);
+                // Plain channel p of [upsampled, skip] was channel `order[p]` of the copies interleaved.
+                let order: Vec<usize> = (0..upsampled + skip)
+                    .map(|p| if p < upsampled { (p / a) * (a + b) + p % a } else { ((p - upsampled) / b) * (a + b) + a + (p - upsampled) % b })
+                    .collect();
+                blocks[0] = blocks[0].clone().with_input_order(&order);
+                UpStage { deconv, blocks }
+            })
+            .collect();
+        MinkUNet {
+            stem: self.stem.into_iter().map(|c| c.untied()).collect(),
+            stem_norms: self.stem_norms.into_iter().map(|n| n.untied()).collect(),
+            down,
+            up,
+            copies: 1,
+        }
+    }
+
     /// Per-voxel features on the input's voxels (stride 1).
     pub fn forward(&self, x: SparseTensor) -> SparseTensor {
         let mut levels = self.forward_levels(x);

@@ -22,7 +22,7 @@ use data_jrdb::Batch;
 use std::sync::Arc;
 
 use sparse_conv::SparseTensor;
-use sparse_conv::modules::turns::{FieldTurn, TURNS, TiedKernel};
+use sparse_conv::modules::turns::{FieldTurn, TURNS, TiedKernel, pooled_bias};
 use sparse_conv::modules::{per_voxel_linear, pooled_linear};
 use sparse_conv::burn::module::{Module, Param};
 use sparse_conv::burn::nn::{Linear, LinearConfig};
@@ -46,6 +46,10 @@ pub struct PersonMinkUNet {
     /// The configuration it was built from (targets, loss weights, post-processing).
     #[module(skip)]
     pub config: PersonMinkUNetConfig,
+    /// The head reads one orientation copy and averages the four (quarter-turn symmetry, until
+    /// [`Self::untied`] writes that out as a plain head).
+    #[module(skip)]
+    pub pooled_head: bool,
 }
 
 impl PersonMinkUNet {
@@ -58,7 +62,25 @@ impl PersonMinkUNet {
             backbone: backbone_cfg.init(device),
             head: LinearConfig::new(backbone_cfg.out_channels() / copies, channels).init(device),
             config: config.clone(),
+            pooled_head: copies > 1,
         }
+    }
+
+    /// The same network with its quarter-turn ties written out as plain weights (backbone and
+    /// head), computing the same function at a plain network's cost: what inference runs. Its
+    /// record no longer loads into a network built from the config; train the tied one.
+    pub fn untied(mut self) -> Self {
+        if !self.pooled_head {
+            return self;
+        }
+        let turn = self.head_turn();
+        let [c, n] = self.head.weight.dims();
+        let weight = TiedKernel::pooling(c, &turn).expand(self.head.weight.val().reshape([1, c, n]));
+        self.head.weight = Param::from_tensor(weight.reshape([TURNS * c, n]));
+        self.head.bias = self.head.bias.map(|b| Param::from_tensor(pooled_bias(b.val(), &turn)));
+        self.backbone = self.backbone.untied();
+        self.pooled_head = false;
+        self
     }
 
     /// How the head's channels change when the cloud turns by 90°: in the base frame the centre
@@ -166,17 +188,22 @@ impl PersonMinkUNet {
 
     /// Head output for every voxel of the batch, `[M, coder().channels()]` (layout in [`box_coder`]).
     pub fn forward(&self, batch: &Batch, device: &Device) -> Tensor<2> {
-        if self.config.symmetry == Symmetry::None {
-            let x = self.backbone.forward(Self::input(batch, self.config.input, device));
-            return per_voxel_linear(&self.head, &x);
+        let input = match self.config.symmetry {
+            Symmetry::None => Self::input(batch, self.config.input, device),
+            Symmetry::QuarterTurns => {
+                assert_eq!(
+                    batch.voxel_size[0], batch.voxel_size[1],
+                    "model.symmetry = \"quarter_turns\" needs square voxels in x and y, got {:?}",
+                    batch.voxel_size
+                );
+                Self::input_about(batch, self.config.input, Self::turn_centre(batch.voxel_size), device)
+            }
+        };
+        let x = self.backbone.forward(input);
+        match self.pooled_head {
+            true => pooled_linear(&self.head, &x, &self.head_turn()),
+            false => per_voxel_linear(&self.head, &x),
         }
-        assert_eq!(
-            batch.voxel_size[0], batch.voxel_size[1],
-            "model.symmetry = \"quarter_turns\" needs square voxels in x and y, got {:?}",
-            batch.voxel_size
-        );
-        let input = Self::input_about(batch, self.config.input, Self::turn_centre(batch.voxel_size), device);
-        pooled_linear(&self.head, &self.backbone.forward(input), &self.head_turn())
     }
 }
 

@@ -1,8 +1,8 @@
 //! The blocks of a sparse U-Net (SPVNAS MinkUNet, its `core/models/semantic_kitti/minkunet.py`).
 
 use burn::config::Config;
-use burn::module::Module;
-use burn::tensor::Device;
+use burn::module::{Module, Param};
+use burn::tensor::{Device, Int, Tensor, TensorData};
 
 use super::turns::{TURNS, TiedKernel};
 use super::{
@@ -50,6 +50,11 @@ impl ConvBnReluConfig {
 }
 
 impl ConvBnRelu {
+    /// Its ties written out ([`SparseConv3d::untied`], [`SparseBatchNorm::untied`]).
+    pub fn untied(self) -> Self {
+        Self { conv: self.conv.untied(), norm: self.norm.untied() }
+    }
+
     /// Applies the module to `x`'s features, on `x`'s coordinates (or the level it maps to).
     pub fn forward(&self, x: SparseTensor) -> SparseTensor {
         self.conv.forward_norm(x, &self.norm, Epilogue::Relu)
@@ -94,6 +99,11 @@ impl DeconvBnReluConfig {
 }
 
 impl DeconvBnRelu {
+    /// Its ties written out ([`SparseConvTranspose3d::untied`], [`SparseBatchNorm::untied`]).
+    pub fn untied(self) -> Self {
+        Self { conv: self.conv.untied(), norm: self.norm.untied() }
+    }
+
     /// Applies the module to `x`'s features, on `x`'s coordinates (or the level it maps to).
     pub fn forward(&self, x: SparseTensor) -> SparseTensor {
         self.conv.forward_norm(x, &self.norm, Epilogue::Relu)
@@ -162,6 +172,33 @@ impl ResidualBlockConfig {
 }
 
 impl ResidualBlock {
+    /// Its ties written out ([`SubmanifoldConv3d::untied`], [`SparseBatchNorm::untied`]).
+    pub fn untied(self) -> Self {
+        Self {
+            conv1: self.conv1.untied(),
+            norm1: self.norm1.untied(),
+            conv2: self.conv2.untied(),
+            norm2: self.norm2.untied(),
+            shortcut: self.shortcut.map(|s| Shortcut { conv: s.conv.untied(), norm: s.norm.untied() }),
+        }
+    }
+
+    /// The same block fed its input channels in another order: input channel `i` is what
+    /// channel `order[i]` was (the rows of the first convolution and of the shortcut reordered).
+    pub fn with_input_order(mut self, order: &[usize]) -> Self {
+        let reorder = |w: Param<Tensor<3>>| {
+            let index: Vec<i64> = order.iter().map(|&i| i as i64).collect();
+            let device = w.val().device();
+            Param::from_tensor(w.val().select(1, Tensor::<1, Int>::from_data(TensorData::new(index, [order.len()]), &device)))
+        };
+        assert!(self.conv1.tied.is_none(), "reorder the input of an untied block");
+        self.conv1.weight = reorder(self.conv1.weight);
+        if let Some(shortcut) = &mut self.shortcut {
+            shortcut.conv.weight = reorder(shortcut.conv.weight.clone());
+        }
+        self
+    }
+
     /// Applies the module to `x`'s features, on `x`'s coordinates (or the level it maps to).
     pub fn forward(&self, x: SparseTensor) -> SparseTensor {
         let main = self.conv1.forward_norm(x.clone(), &self.norm1, Epilogue::Relu);

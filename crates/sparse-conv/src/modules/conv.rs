@@ -26,6 +26,14 @@ fn tied_weight(tied: &TiedKernel, volume: usize, c_in: usize, c_out: usize, boun
     uniform_weight(k, i, o, bound, device)
 }
 
+/// `weight` written out as the full weights `tied` builds from it (no tie left).
+fn untied_weight(weight: Param<Tensor<3>>, tied: Option<Arc<TiedKernel>>) -> Param<Tensor<3>> {
+    match tied {
+        Some(tied) => Param::from_tensor(tied.expand(weight.val())),
+        None => weight,
+    }
+}
+
 /// The weights a convolution runs with: its own, or those `tied` builds from them.
 fn full_weight(weight: &Param<Tensor<3>>, tied: &Option<Arc<TiedKernel>>) -> Tensor<3> {
     match tied {
@@ -87,6 +95,12 @@ fn then_norm(norm: &SparseBatchNorm, epilogue: Epilogue) -> impl Fn(Tensor<2>, T
 }
 
 impl SubmanifoldConv3d {
+    /// The same convolution with its tied weights written out: plain weights computing the
+    /// same function (for inference, where the tie only costs time).
+    pub fn untied(self) -> Self {
+        Self { weight: untied_weight(self.weight, self.tied), tied: None, ..self }
+    }
+
     /// Applies the module to `x`'s features, on `x`'s coordinates (or the level it maps to).
     pub fn forward(&self, x: SparseTensor) -> SparseTensor {
         self.run(x, &|x, w, map| sparse_conv(x, w, map))
@@ -150,6 +164,12 @@ impl SparseConv3dConfig {
 }
 
 impl SparseConv3d {
+    /// The same convolution with its tied weights written out: plain weights computing the
+    /// same function (for inference, where the tie only costs time).
+    pub fn untied(self) -> Self {
+        Self { weight: untied_weight(self.weight, self.tied), tied: None, ..self }
+    }
+
     /// Applies the module to `x`'s features, on `x`'s coordinates (or the level it maps to).
     pub fn forward(&self, x: SparseTensor) -> SparseTensor {
         self.run(x, &|x, w, map| sparse_conv(x, w, map))
@@ -211,6 +231,12 @@ impl SparseConvTranspose3dConfig {
 }
 
 impl SparseConvTranspose3d {
+    /// The same convolution with its tied weights written out: plain weights computing the
+    /// same function (for inference, where the tie only costs time).
+    pub fn untied(self) -> Self {
+        Self { weight: untied_weight(self.weight, self.tied), tied: None, ..self }
+    }
+
     /// Applies the module to `x`'s features, on `x`'s coordinates (or the level it maps to).
     pub fn forward(&self, x: SparseTensor) -> SparseTensor {
         self.run(x, &|x, w, map| sparse_conv(x, w, map))

@@ -1,7 +1,7 @@
 //! Batch norm over voxel features.
 
 use burn::config::Config;
-use burn::module::Module;
+use burn::module::{Module, Param, RunningState};
 use burn::nn::{BatchNorm, BatchNormConfig};
 use std::sync::Arc;
 
@@ -58,6 +58,22 @@ impl SparseBatchNormConfig {
 }
 
 impl SparseBatchNorm {
+    /// The same norm over plain channels: each copy's parameters and running statistics
+    /// repeated, so that it computes what the shared norm does (for inference).
+    pub fn untied(self) -> Self {
+        if self.copies == 1 {
+            return self;
+        }
+        let copies = self.copies;
+        let every = |v: Tensor<1>| Tensor::cat(vec![v; copies], 0);
+        let mut inner = self.inner;
+        inner.gamma = Param::from_tensor(every(inner.gamma.val()));
+        inner.beta = Param::from_tensor(every(inner.beta.val()));
+        inner.running_mean = RunningState::new(every(inner.running_mean.value()));
+        inner.running_var = RunningState::new(every(inner.running_var.value()));
+        SparseBatchNorm { inner, copies: 1 }
+    }
+
     /// Applies the module to `x`'s features, on `x`'s coordinates (or the level it maps to).
     pub fn forward(&self, x: SparseTensor) -> SparseTensor {
         let features = self.features(x.features(), Epilogue::Identity);
