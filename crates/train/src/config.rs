@@ -223,6 +223,13 @@ impl RunConfig {
         self.data.volume.validate(self.data.voxel_size).map_err(anyhow::Error::msg)?;
         self.train.schedule.validate()?;
         self.model.validate().map_err(anyhow::Error::msg)?;
+        // A quarter turn maps the lattice onto itself only when x and y cells are the same size.
+        if let ModelConfig::PersonMinkunet(m) = &self.model
+            && m.symmetry == model::person_minkunet::Symmetry::QuarterTurns
+            && self.data.voxel_size[0] != self.data.voxel_size[1]
+        {
+            bail!("model.symmetry = \"quarter_turns\" needs square voxels in x and y, got data.voxel_size = {:?}", self.data.voxel_size);
+        }
         Ok(())
     }
 }
@@ -286,6 +293,15 @@ mod tests {
         assert!(c.train.optimizer.amsgrad);
         assert_eq!(c.train.schedule, Schedule::ExpDecay { lr0: 1e-3, epoch0: 15.0, lr1: 1e-6, epoch1: 40.0 });
         assert_eq!(c.backend, BackendKind::Flex);
+    }
+
+    #[test]
+    fn quarter_turns_refuse_voxels_that_are_not_square() {
+        let text = "[data]\nvoxel_size = [0.2, 0.1, 0.2]\n[model]\nkind = \"person_minkunet\"\nsymmetry = \"quarter_turns\"\n";
+        let e = RunConfig::from_toml_str(text).and_then(|c| c.validate()).expect_err("non-square voxels accepted").to_string();
+        assert!(e.contains("square voxels") && e.contains("voxel_size"), "{e}");
+        let square = text.replace("0.1", "0.2");
+        RunConfig::from_toml_str(&square).and_then(|c| c.validate()).expect("square voxels refused");
     }
 
     #[test]
