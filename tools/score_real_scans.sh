@@ -19,6 +19,10 @@
 # frame, so the same ground truth scores them. A quarter turn maps the voxel grid onto itself: the
 # figures under the four quarter turns are the yardstick's spread for one set of weights
 # (docs/results/real_scans_turns/).
+#
+# SHIFT ("x,y" in metres, default none; only with FRAME=default) moves every cloud after the turn
+# (`--transform auto,yaw=TURN,x=…,y=…`), so it falls elsewhere on the voxel lattice; the boxes come
+# back in the cloud's own frame. tools/score_placements.sh averages over turns and shifts.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=${1:-target/real-scans}
@@ -33,8 +37,16 @@ if [[ $turn != 0 && ${FRAME:-default} != default ]]; then
     echo "TURN is only given with FRAME=default" >&2
     exit 2
 fi
+shift_xy=""
+if [[ -n ${SHIFT:-} ]]; then
+    if [[ ${FRAME:-default} != default || ! $SHIFT =~ ^-?[0-9.]+,-?[0-9.]+$ ]]; then
+        echo "SHIFT is \"x,y\" in metres, only with FRAME=default" >&2
+        exit 2
+    fi
+    shift_xy=",x=${SHIFT%,*},y=${SHIFT#*,}"
+fi
 case "${FRAME:-default}" in
-    default) pose=([sustechpoints]="auto,yaw=$turn" [nuscenes]="auto,yaw=$turn" [argoverse2]="auto,yaw=$turn") ;;
+    default) pose=([sustechpoints]="auto,yaw=$turn$shift_xy" [nuscenes]="auto,yaw=$turn$shift_xy" [argoverse2]="auto,yaw=$turn$shift_xy") ;;
     auto) pose=([sustechpoints]="auto" [nuscenes]="auto,yaw=-90" [argoverse2]="auto,x=-1.35") ;;
     given) ;;
     *) echo "FRAME must be default, auto or given" >&2; exit 2 ;;
