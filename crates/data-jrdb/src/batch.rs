@@ -2,7 +2,7 @@
 
 use rand::Rng;
 
-use crate::augment::{AugmentConfig, Augmentation};
+use crate::augment::{AugmentConfig, Augmentation, perturb_points};
 use crate::box3d::Box3d;
 use crate::dataset::Frame;
 use crate::volume::Volume;
@@ -69,6 +69,7 @@ pub fn prepare<R: Rng + ?Sized>(mut frame: Frame, cfg: &SampleConfig, rng: &mut 
     let augmentation = cfg.augment.map(|a| {
         let t = Augmentation::sample(&a, rng);
         t.apply_points(&mut frame.points);
+        perturb_points(&a, &mut frame.points, rng);
         frame.boxes = frame.boxes.iter().map(|b| t.apply_box(b)).collect();
         frame.ignored = frame.ignored.iter().map(|b| t.apply_box(b)).collect();
         t
@@ -231,6 +232,39 @@ mod tests {
             points: (0..voxels).map(|v| [v as f32, i as f32, 0.0]).collect(),
             augmentation: None,
         }
+    }
+
+    #[test]
+    fn prepare_applies_the_perturbations_and_nothing_when_they_are_off() {
+        use rand::SeedableRng;
+        let frame = || Frame {
+            sequence: "s".into(),
+            name: "000000".into(),
+            points: (0..4000).map(|i| [(i % 40) as f32 * 0.25 - 5.0, (i / 40) as f32 * 0.1 - 5.0, -0.5]).collect(),
+            n_upper: 4000,
+            dropped_non_finite: 0,
+            boxes: vec![Box3d { cx: 1.0, cy: 1.0, cz: 0.2, l: 0.5, w: 0.5, h: 1.7, rot_z: 0.0 }],
+            num_points: vec![10],
+            label_ids: vec!["p".into()],
+            ignored: vec![],
+        };
+        let cfg = |augment| SampleConfig { augment: Some(augment), keep_points: true, max_voxels: None, ..SampleConfig::default() };
+        let run = |augment| prepare(frame(), &cfg(augment), &mut rand_chacha::ChaCha8Rng::seed_from_u64(1));
+        let plain = run(AugmentConfig::default());
+        assert_eq!(plain.points.len(), 4000);
+        let turned = plain.augmentation.unwrap();
+        let moved = run(AugmentConfig { translate: [0.5, 0.5, 0.1], ..AugmentConfig::default() });
+        let t = moved.augmentation.unwrap().translation;
+        assert!(t.iter().all(|v| *v != 0.0), "{t:?}");
+        // Same scale and turn (drawn first), then moved by t: points and the box alike.
+        assert_eq!((moved.augmentation.unwrap().scale, moved.augmentation.unwrap().angle), (turned.scale, turned.angle));
+        for (p, q) in plain.points.iter().zip(&moved.points) {
+            assert!((0..3).all(|k| ((q[k] - p[k]) as f64 - t[k]).abs() < 1e-5));
+        }
+        assert!((moved.boxes[0].cx - plain.boxes[0].cx - t[0]).abs() < 1e-12 && (moved.boxes[0].cz - plain.boxes[0].cz - t[2]).abs() < 1e-12);
+        let dropped = run(AugmentConfig { drop: 0.5, jitter: 0.01, ..AugmentConfig::default() });
+        assert!(dropped.points.len() < 4000 && dropped.n_points == dropped.points.len(), "{}", dropped.points.len());
+        assert_eq!(dropped.boxes, plain.boxes);
     }
 
     #[test]

@@ -64,6 +64,11 @@ impl Box3d {
         Box3d { cx: self.cx * s, cy: self.cy * s, cz: self.cz * s, l: self.l * s, w: self.w * s, h: self.h * s, rot_z: self.rot_z }
     }
 
+    /// The box after moving the world by `t` (its centre alike).
+    pub fn translated(&self, t: [f64; 3]) -> Box3d {
+        Box3d { cx: self.cx + t[0], cy: self.cy + t[1], cz: self.cz + t[2], ..*self }
+    }
+
     /// Number of `points` inside the box (the recount `num_points` is compared with).
     pub fn count_inside(&self, points: &[[f32; 3]]) -> usize {
         points.iter().filter(|p| self.contains([p[0] as f64, p[1] as f64, p[2] as f64])).count()

@@ -106,7 +106,7 @@ impl DataConfig {
         SampleConfig {
             volume: self.volume,
             voxel: VoxelConfig { voxel_size: self.voxel_size, pooling: self.pooling },
-            augment: self.augment.enabled.then_some(AugmentConfig { scale: self.augment.scale, rotate: self.augment.rotate }),
+            augment: self.augment.enabled.then_some(self.augment.to_config()),
             max_voxels: self.max_voxels.filter(|&m| m > 0),
             keep_points: false,
         }
@@ -144,7 +144,8 @@ fn is_default<T: Default + PartialEq>(v: &T) -> bool {
     *v == T::default()
 }
 
-/// Training augmentation: `p ↦ s·R(α)·p`, `s ~ U(scale)`, `α ~ U(0, 2π)` (the authors').
+/// Training augmentation: `p ↦ s·R(α)·p + t`, `s ~ U(scale)`, `α ~ U(0, 2π)` (the authors'), `t`
+/// and the point perturbations off unless set (`augment::AugmentConfig`).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct AugmentSection {
@@ -154,10 +155,41 @@ pub struct AugmentSection {
     pub scale: [f64; 2],
     /// Random rotation about z.
     pub rotate: bool,
+    /// Half-ranges of a random translation in x, y, z (m).
+    pub translate: [f64; 3],
+    /// Standard deviation of each point's random displacement (m).
+    pub jitter: f64,
+    /// Largest fraction of a frame's points dropped at random.
+    pub drop: f64,
 }
 
 impl Default for AugmentSection {
     fn default() -> Self {
-        Self { enabled: true, scale: [0.95, 1.05], rotate: true }
+        let a = AugmentConfig::default();
+        Self { enabled: true, scale: a.scale, rotate: a.rotate, translate: a.translate, jitter: a.jitter, drop: a.drop }
+    }
+}
+
+impl AugmentSection {
+    /// The ranges sampling needs: finite, a positive scale range in order, the rest ≥ 0, `drop` < 1.
+    pub fn validate(&self) -> Result<(), String> {
+        let [lo, hi] = self.scale;
+        if !(lo.is_finite() && hi.is_finite() && lo > 0.0 && lo <= hi) {
+            return Err(format!("data.augment.scale must be two finite positive numbers, lowest first, got {:?}", self.scale));
+        }
+        if self.translate.iter().any(|h| !(h.is_finite() && *h >= 0.0)) {
+            return Err(format!("data.augment.translate must be three finite half-ranges ≥ 0 (metres), got {:?}", self.translate));
+        }
+        if !(self.jitter.is_finite() && self.jitter >= 0.0) {
+            return Err(format!("data.augment.jitter must be a finite standard deviation ≥ 0 (metres), got {}", self.jitter));
+        }
+        if !(0.0..1.0).contains(&self.drop) {
+            return Err(format!("data.augment.drop must be a fraction in [0, 1), got {}", self.drop));
+        }
+        Ok(())
+    }
+
+    fn to_config(self) -> AugmentConfig {
+        AugmentConfig { scale: self.scale, rotate: self.rotate, translate: self.translate, jitter: self.jitter, drop: self.drop }
     }
 }

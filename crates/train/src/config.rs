@@ -221,6 +221,7 @@ impl RunConfig {
             bail!("data.voxel_size must be positive, got {:?}", self.data.voxel_size);
         }
         self.data.volume.validate(self.data.voxel_size).map_err(anyhow::Error::msg)?;
+        self.data.augment.validate().map_err(anyhow::Error::msg)?;
         self.train.schedule.validate()?;
         self.model.validate().map_err(anyhow::Error::msg)?;
         // A quarter turn maps the lattice onto itself only when x and y cells are the same size.
@@ -302,6 +303,28 @@ mod tests {
         assert!(e.contains("square voxels") && e.contains("voxel_size"), "{e}");
         let square = text.replace("0.1", "0.2");
         RunConfig::from_toml_str(&square).and_then(|c| c.validate()).expect("square voxels refused");
+    }
+
+    #[test]
+    fn augmentation_ranges_are_checked_naming_the_key() {
+        for (section, key) in [
+            ("scale = [1.05, 0.95]", "scale"),
+            ("scale = [0.0, 1.0]", "scale"),
+            ("translate = [0.5, -0.1, 0.0]", "translate"),
+            ("translate = [0.5, inf, 0.0]", "translate"),
+            ("jitter = -0.01", "jitter"),
+            ("jitter = nan", "jitter"),
+            ("drop = 1.0", "drop"),
+            ("drop = -0.2", "drop"),
+        ] {
+            let text = format!("{MIN}[data.augment]\n{section}\n");
+            let e = RunConfig::from_toml_str(&text).and_then(|c| c.validate()).expect_err(&text).to_string();
+            assert!(e.contains(&format!("data.augment.{key}")), "error for `{section}` does not name the key: {e}");
+        }
+        let c = RunConfig::from_toml_str(&format!("{MIN}[data.augment]\ntranslate = [0.5, 0.5, 0.1]\njitter = 0.02\ndrop = 0.2\n")).unwrap();
+        c.validate().unwrap();
+        let a = c.data.train_sample().augment.unwrap();
+        assert_eq!((a.translate, a.jitter, a.drop), ([0.5, 0.5, 0.1], 0.02, 0.2));
     }
 
     #[test]
