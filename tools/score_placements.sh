@@ -35,26 +35,5 @@ for turn in 0 90 180 270; do
     done
 done
 python3 tools/real_scans_per_person.py "${columns[@]}" > "$out/per-person.txt"
-python3 - "$out" > "$out/summary.txt" <<'EOF'
-import re, statistics as st, sys
-out = sys.argv[1]
-pat = re.compile(r"AP ([\d.]+) % over (\d+) people; at score >= 0.5: recall [\d.]+ % \((\d+) found\), ([\d.]+) false boxes per frame; on the platform at score >= 0.5: (\d+)")
-rows = [pat.search(l) for l in open(f"{out}/placements.txt")]
-ap, found, fp, plat = ([float(m[i]) for m in rows] for i in (1, 3, 4, 5))
-people = int(rows[0][2])
-def line(name, v, fmt):
-    return f"{name}: mean {st.mean(v):{fmt}}, sd {st.stdev(v):{fmt}}, range {min(v):{fmt}}–{max(v):{fmt}}"
-print(f"{len(rows)} placements (4 quarter turns × 16 shifts of 0–0.3 m), {people} people")
-print(line("bird's-eye-centre AP %", ap, ".1f"))
-print(line("people found at 0.5", found, ".2f"))
-print(line("false boxes a frame", fp, ".2f"))
-print(f"boxes on the platform: {int(sum(plat))} over all placements")
-per = [l for l in open(f"{out}/per-person.txt") if not l.startswith(("source ", "found at"))]
-rates = sorted((l.count("*") / len(rows), "  ".join(l.split()[:4])) for l in per)
-print(f"pedestrians found in at least half the placements: {sum(r >= 0.5 for r, _ in rates)} of {len(rates)}; "
-      f"in every one: {sum(r == 1 for r, _ in rates)}; in none: {sum(r == 0 for r, _ in rates)}")
-for r, who in rates:
-    print(f"  {r:5.0%}  {who}")
-print("(source, frame, range in m, points)")
-EOF
+python3 tools/placements.py summary "$out" > "$out/summary.txt"
 cat "$out/summary.txt"
