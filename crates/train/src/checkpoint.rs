@@ -138,6 +138,16 @@ impl Checkpoints {
     /// Writes a checkpoint of `model`, `optim` and `state`, then points `slots` at it and removes
     /// the folders no pointer names any more.
     pub fn save<M: Module>(&self, model: &M, optim: &ModuleOptimizer, state: &TrainState, slots: &[Slot]) -> Result<CheckpointFiles> {
+        self.write(model, Some(optim), state, slots)
+    }
+
+    /// As [`save`](Self::save) without an optimizer state: weights made rather than trained (a
+    /// soup), which `train.init` and inference read and `--resume` refuses.
+    pub fn save_weights<M: Module>(&self, model: &M, state: &TrainState, slots: &[Slot]) -> Result<CheckpointFiles> {
+        self.write(model, None, state, slots)
+    }
+
+    fn write<M: Module>(&self, model: &M, optim: Option<&ModuleOptimizer>, state: &TrainState, slots: &[Slot]) -> Result<CheckpointFiles> {
         std::fs::create_dir_all(&self.dir).with_context(|| format!("creating {}", self.dir.display()))?;
         let name = format!("step-{:09}", state.step);
         let final_dir = self.dir.join(&name);
@@ -148,7 +158,9 @@ impl Checkpoints {
             }
             std::fs::create_dir_all(&tmp.dir)?;
             model.clone().save_file(tmp.model()).map_err(|e| anyhow::anyhow!("writing {}: {e:?}", tmp.model().display()))?;
-            optim.save(tmp.optim()).map_err(|e| anyhow::anyhow!("writing {}: {e:?}", tmp.optim().display()))?;
+            if let Some(optim) = optim {
+                optim.save(tmp.optim()).map_err(|e| anyhow::anyhow!("writing {}: {e:?}", tmp.optim().display()))?;
+            }
             std::fs::write(tmp.state(), serde_json::to_string_pretty(state)?)?;
             std::fs::rename(&tmp.dir, &final_dir).with_context(|| format!("renaming {} to {}", tmp.dir.display(), final_dir.display()))?;
         }

@@ -13,7 +13,8 @@
 //!   fitted on frames not scored), [`render`] (BEV PNGs);
 //! - on the user's own clouds: [`sensor_pose`] (their frame in JRDB's), [`detect`] (files,
 //!   folders, trees → JSON, KITTI txt, PNG), [`serve`] (the same over HTTP);
-//! - many runs: [`sweep`] (its [`sweep::Executor`] seam: the local runner today), [`stats`].
+//! - many runs: [`sweep`] (its [`sweep::Executor`] seam: the local runner today), [`stats`],
+//!   [`soup`] (runs fine-tuned from one set of weights, averaged into one).
 //!
 //! The binary (`cargo run -p train -- --help`) wraps [`trainer::train`], [`infer::infer`],
 //! [`sweep::run_sweep`], [`detect::detect`] and [`serve::serve`].
@@ -61,6 +62,8 @@ pub mod sensor_pose;
 pub mod serve;
 /// Mean, spread and 95 % intervals over seeds.
 pub mod stats;
+/// Several runs' weights averaged into one network.
+pub mod soup;
 /// Sweeps over variants and seeds, run by an [`sweep::Executor`].
 pub mod sweep;
 /// The training loop.
@@ -80,6 +83,7 @@ pub use run_dir::{Existing, RunDir};
 pub use schedule::Schedule;
 pub use sensor_pose::{FrameSpec, Placement, SensorPose};
 pub use serve::ServeOptions;
+pub use soup::{SoupReport, soup};
 pub use sweep::{SweepConfig, SweepResults, run_sweep};
 pub use trainer::{TrainOptions, TrainSummary, train, train_model};
 pub use validate::{FrameResult, Validation, validate};

@@ -231,6 +231,17 @@ enum Cmd {
         #[arg(long, default_value_t = 30.0)]
         read_timeout_s: f64,
     },
+    /// Average the weights of runs fine-tuned from one set of weights (a "model soup") into a
+    /// new run folder, to fit with `calibrate` and `facing` and use as any run: one network's
+    /// cost, the ingredients' answers averaged.
+    Soup {
+        /// A run to average (repeatable; the same network shape, its latest checkpoint).
+        #[arg(long = "run", value_name = "DIR", required = true)]
+        runs: Vec<PathBuf>,
+        /// The new run folder (must not exist).
+        #[arg(long, value_name = "DIR")]
+        out: PathBuf,
+    },
     /// Run a sweep file: variants × seeds, then results.csv, results.md and curves.png.
     Sweep {
         /// The sweep's TOML file.
@@ -494,6 +505,13 @@ fn main() -> ExitCode {
                 verbose: true,
             };
             println!("{}", train::fit_facing(&dir, &opts)?);
+            Ok(())
+        })(),
+        Some(Cmd::Soup { runs, out }) => (|| -> Result<()> {
+            pin(RunDir::at(&runs[0]).config()?.backend);
+            let report = train::soup(&runs, &out)?;
+            print!("{report}");
+            println!("written to {} (fit it: train calibrate --run {0} --write; train facing --run {0} --write)", out.display());
             Ok(())
         })(),
         Some(Cmd::Calibrate { on: NotScored { run, split, checkpoint, backend, data_root }, write }) => (|| -> Result<()> {
