@@ -20,12 +20,18 @@ Writes OUT/<name>.npy (N x 3 float32) and OUT/backdrops.csv (file, sensor, sourc
                    30-32 and their moving 253-255; RELLIS 17), any point within 0.3 m of one, and
                    no-return (0, 0, 0) points are removed; RELLIS's robot's own returns (within
                    2.5 m) too. Needs scipy.
+  --pjlab MIRROR   a fetched PJLab-ADG/SensorsCalibration (Apache-2.0): nine roof-LiDAR scans
+                   of Shanghai streets and car parks from its calibration data (PJLAB below; a
+                   Hesai Pandar64, -25 to +15 degrees). Not labelled: people are taken out by the
+                   shipped detector (`target/debug/train detect`, the frame found from the
+                   ground), every box scoring >= 0.2 grown by 0.3 m, its points removed; people it
+                   misses stay in. Needs python-lzf (the scans are LZF-compressed PCDs).
   --balance        list each place's scans so every place gets an equal share of the sequences
                    (the simulator takes backdrops.csv's rows in turn): without it the 50 motorway
                    frames would be most of them.
 
 Never use the scans `real-scans/` scores on: they are the yardstick.
-    python3 tools/import_backdrops.py OUT --aimotive A --kitti K [--labelled /work/.mirror --balance]
+    python3 tools/import_backdrops.py OUT --aimotive A --kitti K [--labelled /work/.mirror --pjlab /work/.mirror --balance]
 """
 import argparse
 import glob
@@ -143,12 +149,90 @@ def labelled(mirrors, out, rows, margin=0.3):
             rows.append((name + ".npy", sensor, f"{repo.replace('+', '/')}@{commit_[:12]}:{scan} ({int(person.sum())} person-class points removed)"))
 
 
+# (repository, commit, scans). Each scan shows another street, crossing or car park.
+PJLAB = ("PJLab-ADG+SensorsCalibration", "7fe8d46caac040cbcd89cc65e79e5519df01bcd4", [
+    "lidar2lidar/auto_calib/data/0001/top.pcd",
+    "lidar2lidar/auto_calib/data/0002/top-2022-02-15-17-36-04-449.pcd",
+    "lidar2lidar/auto_calib/data/0003/top-2022-02-15-17-45-07-750.pcd",
+    "lidar2lidar/manual_calib/data/p64.pcd",
+    "lidar2camera/auto_calib_v2.0/data/ours/1/calib.pcd",
+    "lidar2camera/auto_calib_v2.0/data/ours/2/calib.pcd",
+    "lidar2camera/auto_calib_v2.0/data/ours/3/calib.pcd",
+    "lidar2camera/manual_calib/data/0.pcd",
+    "radar2lidar/manual_calib/data/lidar.pcd",
+])
+
+
+def read_pcd(blob, what):
+    """x, y, z of a PCD's points (ascii, binary or binary_compressed; fields of COUNT 1 or more)."""
+    end = blob.index(b"DATA")
+    body = blob.index(b"\n", end) + 1
+    head = {l.split()[0]: l.split()[1:] for l in blob[:body].decode("ascii", "replace").splitlines() if l.strip() and not l.startswith("#")}
+    n, fields = int(head["POINTS"][0]), head["FIELDS"]
+    sizes, types = [int(v) for v in head["SIZE"]], head["TYPE"]
+    counts = [int(v) for v in head.get("COUNT", ["1"] * len(fields))]
+    kind = head["DATA"][0]
+    if not all(k in fields for k in "xyz"):
+        raise SystemExit(f"{what}: no x, y, z fields ({fields})")
+    dtype = [np.dtype({"F": "f", "U": "u", "I": "i"}[t] + str(s)) for s, t in zip(sizes, types)]
+    if kind == "ascii":
+        rows = np.array([l.split() for l in blob[body:].decode().splitlines() if l.strip()], dtype=np.float64)
+        first = np.cumsum([0] + counts)
+        return np.stack([rows[:, first[fields.index(k)]] for k in "xyz"], 1).astype(np.float32)
+    if kind == "binary":
+        rec = np.dtype([(f"f{i}", d, (c,)) for i, (d, c) in enumerate(zip(dtype, counts)) if c > 0])
+        a = np.frombuffer(blob[body:body + n * rec.itemsize], rec)
+        return np.stack([a[f"f{fields.index(k)}"][:, 0] for k in "xyz"], 1).astype(np.float32)
+    if kind == "binary_compressed":
+        import lzf
+        import struct
+
+        packed, unpacked = struct.unpack("<II", blob[body:body + 8])
+        raw = lzf.decompress(blob[body + 8:body + 8 + packed], unpacked)
+        cols, off = {}, 0
+        for name, d, c in zip(fields, dtype, counts):
+            cols[name] = np.frombuffer(raw[off:off + n * d.itemsize * c], d).reshape(n, c)
+            off += n * d.itemsize * c
+        return np.stack([cols[k][:, 0] for k in "xyz"], 1).astype(np.float32)
+    raise SystemExit(f"{what}: DATA {kind} not read")
+
+
+def pjlab(mirrors, out, rows, threshold=0.2, margin=0.3, train="target/debug/train"):
+    import json
+    import tempfile
+
+    repo, commit_, scans = PJLAB
+    mirror = os.path.join(mirrors, repo)
+    if not os.path.exists(mirror):
+        raise SystemExit(f"{mirror}: missing (fetch github:{repo.replace('+', '/')} first)")
+    with tempfile.TemporaryDirectory() as tmp:
+        names = []
+        for i, scan in enumerate(scans):
+            p = read_pcd(git_show(mirror, commit_, scan), f"{repo}:{scan}")
+            p = p[np.isfinite(p).all(1) & (np.abs(p).sum(1) > 0)]
+            name = f"pjlab-{i:02d}"
+            np.save(os.path.join(tmp, name + ".npy"), p)
+            names.append((name, scan, p))
+        subprocess.run([train, "detect", tmp, "--score-threshold", str(threshold), "--out", os.path.join(tmp, "det")], check=True, stdout=subprocess.DEVNULL)
+        for name, scan, p in names:
+            boxes = json.load(open(os.path.join(tmp, "det", "json", name + ".json")))["detections"]
+            keep = np.ones(len(p), bool)
+            for b in boxes:
+                d = p[:, :2] - np.array([b["x"], b["y"]])
+                c, s_ = np.cos(b["yaw"]), np.sin(b["yaw"])
+                along, across = c * d[:, 0] + s_ * d[:, 1], -s_ * d[:, 0] + c * d[:, 1]
+                inside = (abs(along) < b["l"] / 2 + margin) & (abs(across) < b["w"] / 2 + margin) & (abs(p[:, 2] - b["z"]) < b["h"] / 2 + margin)
+                keep &= ~inside
+            np.save(os.path.join(out, name + ".npy"), p[keep])
+            rows.append((name + ".npy", "pandar64", f"{repo.replace('+', '/')}@{commit_[:12]}:{scan} (unlabelled; {len(boxes)} boxes scoring >= {threshold} removed, {int((~keep).sum())} points)"))
+
+
 def place(row):
-    """The place a backdrop shows: a KITTI object frame is its own; a sequence's frames share one."""
+    """The place a backdrop shows: a KITTI object frame and a PJLab scan are their own; a sequence's frames share one."""
     name = row[0]
     if name.startswith("aimotive-"):
         return "aimotive"
-    if name.startswith("kitti-"):
+    if name.startswith(("kitti-", "pjlab-")):
         return name
     return name.rsplit("-", 1)[0]
 
@@ -169,6 +253,8 @@ def main():
     ap.add_argument("--aimotive")
     ap.add_argument("--kitti")
     ap.add_argument("--labelled", metavar="MIRRORS")
+    ap.add_argument("--pjlab", metavar="MIRRORS")
+    ap.add_argument("--train", default="target/debug/train", help="the train binary --pjlab detects with")
     ap.add_argument("--balance", action="store_true")
     a = ap.parse_args()
     os.makedirs(a.out, exist_ok=True)
@@ -179,8 +265,10 @@ def main():
         kitti(a.kitti, a.out, rows)
     if a.labelled:
         labelled(a.labelled, a.out, rows)
+    if a.pjlab:
+        pjlab(a.pjlab, a.out, rows, train=a.train)
     if not rows:
-        raise SystemExit("nothing to import: give --aimotive, --kitti and/or --labelled")
+        raise SystemExit("nothing to import: give --aimotive, --kitti, --labelled and/or --pjlab")
     if a.balance:
         rows = balanced(rows)
     with open(os.path.join(a.out, "backdrops.csv"), "w") as f:
