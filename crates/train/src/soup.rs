@@ -22,7 +22,7 @@ use crate::run_dir::{RunDir, write_atomic};
 pub struct SoupReport {
     /// The runs averaged, with the checkpoint each gave.
     pub ingredients: Vec<PathBuf>,
-    /// Float tensors averaged (weights and running statistics) and their total size.
+    /// Float tensors averaged (weights and running statistics).
     pub tensors: usize,
     /// Values averaged in all.
     pub values: usize,
