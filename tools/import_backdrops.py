@@ -25,7 +25,10 @@ Writes OUT/<name>.npy (N x 3 float32) and OUT/backdrops.csv (file, sensor, sourc
                    Hesai Pandar64, -25 to +15 degrees). Not labelled: people are taken out by the
                    shipped detector (`target/debug/train detect`, the frame found from the
                    ground), every box scoring >= 0.2 grown by 0.3 m, its points removed; people it
-                   misses stay in. Needs python-lzf (the scans are LZF-compressed PCDs).
+                   misses stay in, and what is removed depends on the weights shipped when it
+                   runs (data/backdrops-v3 of 2026-12-07: the soup of git 4be6007). Needs
+                   python-lzf (the scans are LZF-compressed PCDs; this reader of x, y, z is the
+                   tool's own, the project's PCD reader being Rust's `data_jrdb::cloud`).
   --balance        list each place's scans so every place gets an equal share of the sequences
                    (the simulator takes backdrops.csv's rows in turn): without it the 50 motorway
                    frames would be most of them.
