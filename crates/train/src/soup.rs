@@ -14,7 +14,8 @@ use burn::tensor::{Device, Tensor, TensorData};
 use model::ModelConfig;
 use serde::Serialize;
 
-use crate::checkpoint::{Checkpoints, Slot, TrainState};
+use crate::checkpoint::{CheckpointFiles, Checkpoints, Slot, TrainState};
+use crate::config::RunConfig;
 use crate::run_dir::{RunDir, write_atomic};
 
 /// What a soup was made of and how far apart its ingredients were.
@@ -74,28 +75,27 @@ pub fn soup(runs: &[PathBuf], out: &Path) -> Result<SoupReport> {
     let mut config = configs[0].clone();
     config.model.post_mut().radial_shift = 0.0;
     config.name = out.file_name().map(|n| n.to_string_lossy().into_owned());
-    let ingredients: Vec<PathBuf> = files.iter().map(|f| f.dir.clone()).collect();
-    let (report, dir) = match &configs[0].model {
-        ModelConfig::PersonMinkunet(c) => {
-            let models = runs.iter().zip(&files).map(|(r, f)| f.load_model(c.init(&device)).with_context(|| format!("{}'s weights", r.display()))).collect::<Result<Vec<_>>>()?;
-            let (soup, report) = average(models, ingredients, &device)?;
-            (report, write_run(&soup, &config, out)?)
-        }
-        ModelConfig::Centerpoint(c) => {
-            let models = runs.iter().zip(&files).map(|(r, f)| f.load_model(c.init(&device)).with_context(|| format!("{}'s weights", r.display()))).collect::<Result<Vec<_>>>()?;
-            let (soup, report) = average(models, ingredients, &device)?;
-            (report, write_run(&soup, &config, out)?)
-        }
+    let report = match &configs[0].model {
+        ModelConfig::PersonMinkunet(c) => average_into(runs, &files, || c.init(&device), &device, &config, out)?,
+        ModelConfig::Centerpoint(c) => average_into(runs, &files, || c.init(&device), &device, &config, out)?,
     };
-    write_atomic(&dir.root.join("soup.json"), serde_json::to_string_pretty(&report)?.as_bytes())?;
+    write_atomic(&out.join("soup.json"), serde_json::to_string_pretty(&report)?.as_bytes())?;
+    Ok(report)
+}
+
+/// Loads each run's checkpoint into a fresh model of one type, averages them and writes the run.
+fn average_into<M: Module>(runs: &[PathBuf], files: &[CheckpointFiles], init: impl Fn() -> M, device: &Device, config: &RunConfig, out: &Path) -> Result<SoupReport> {
+    let models = runs.iter().zip(files).map(|(r, f)| f.load_model(init()).with_context(|| format!("{}'s weights", r.display()))).collect::<Result<Vec<_>>>()?;
+    let (soup, report) = average(models, files.iter().map(|f| f.dir.clone()).collect(), device)?;
+    write_run(&soup, config, out)?;
     Ok(report)
 }
 
 /// Writes `model` as the only checkpoint of a new run folder with `config`.
-fn write_run<M: Module>(model: &M, config: &crate::config::RunConfig, out: &Path) -> Result<RunDir> {
+fn write_run<M: Module>(model: &M, config: &RunConfig, out: &Path) -> Result<()> {
     let dir = RunDir::create(out, config, crate::run_dir::Existing::Refuse)?;
     Checkpoints::new(dir.checkpoints()).save_weights(model, &TrainState::default(), &[Slot::Latest, Slot::Best])?;
-    Ok(dir)
+    Ok(())
 }
 
 /// The element-wise mean of `models` (one architecture), as the first model's structure.
