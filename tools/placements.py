@@ -9,14 +9,15 @@ so the difference per placement is free of the placement's own luck; it prints i
 and how many placements each side wins, for AP, people found at 0.5, false boxes a frame and
 platform boxes.
 """
+import os
 import re
 import statistics
 import sys
 
 # The line score_placements.sh writes: "turn T x X y Y: AP … % over N people; … (K found), F false
-# boxes per frame; on the platform at score >= 0.5: P".
-LINE = re.compile(r"^turn (\S+) x (\S+) y (\S+): AP ([\d.]+) % over (\d+) people; at score >= 0.5: recall [\d.]+ % \((\d+) found\), ([\d.]+) false boxes per frame; on the platform at score >= 0.5: (\d+)")
-FIGURES = ["bird's-eye-centre AP %", "people found at 0.5", "false boxes a frame", "platform boxes"]
+# boxes per frame; on the platform at score >= 0.5: P" (or at the AT_SCORE it was run with).
+LINE = re.compile(r"^turn (\S+) x (\S+) y (\S+): AP ([\d.]+) % over (\d+) people; at score >= [\d.]+: recall [\d.]+ % \((\d+) found\), ([\d.]+) false boxes per frame; on the platform at score >= [\d.]+: (\d+)")
+FIGURES = ["bird's-eye-centre AP %", f"people found at {os.environ.get('AT_SCORE', '0.5')}", "false boxes a frame", "platform boxes"]
 
 
 def read(path):

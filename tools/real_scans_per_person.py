@@ -8,11 +8,14 @@ people flip between outputs (weights, or turns of the input: docs/results/real_s
 never a figure to decide on.
 
     python3 tools/real_scans_per_person.py LABEL=OUT ...   # OUT as tools/score_real_scans.sh wrote it
+
+A star marks a score at or above AT_SCORE (the environment's, default 0.5).
 """
 import glob, math, os, sys
 
 gt_root = os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'real-scans', 'gt')
 cols=[a.split('=',1) for a in sys.argv[1:]]
+at=float(os.environ.get('AT_SCORE','0.5'))
 def read(f):
     out=[]
     for l in open(f):
@@ -35,5 +38,5 @@ for src in sorted(os.listdir(gt_root)):
             rows.append((src,fr[:10],r,g['n'],best))
 print('source       frame       range points  '+'  '.join(f'{l:>7}' for l,_ in cols))
 for src,fr,r,n,b in rows:
-    print(f'{src:12} {fr:10} {r:5.1f} {n:6d}  '+'  '.join(('*' if s>=0.5 else ' ')+f'{s:6.2f}' for s in b))
-print('found at 0.5:', [sum(1 for row in rows if row[4][i]>=0.5) for i in range(len(cols))])
+    print(f'{src:12} {fr:10} {r:5.1f} {n:6d}  '+'  '.join(('*' if s>=at else ' ')+f'{s:6.2f}' for s in b))
+print(f'found at {at}:', [sum(1 for row in rows if row[4][i]>=at) for i in range(len(cols))])

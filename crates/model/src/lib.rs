@@ -42,4 +42,4 @@ pub use detector::{Detections, Detector, LossTerms};
 pub use facing::{FacingClassifier, FacingFeatures, FacingSample};
 pub use person_minkunet::{BoxCoder, BoxFrame, MinkUNet, MinkUNetConfig, PersonMinkUNet, PersonMinkUNetConfig, TargetVariant, UNetLevels};
 pub use post::{NmsKind, PostProcessConfig};
-pub use test_time::{GridTurn, fuse};
+pub use test_time::{GridTurn, focus, fuse, turned_batch};

@@ -75,6 +75,14 @@ pub struct PostProcessConfig {
     /// Boxes of different passes whose bird's-eye centres lie within this radius (metres) of
     /// the best one are one person.
     pub test_time_radius: f64,
+    /// With turns, each turned pass runs only on the points within this bird's-eye radius
+    /// (metres) of a first-pass box scoring at least `test_time_focus_score`; 0: on the whole
+    /// cloud. A fused score only matters where some pass draws a box, and the first pass (the
+    /// cloud as it is, whole) proposes them; the turned passes re-score its proposals at a
+    /// fraction of a pass's cost.
+    pub test_time_focus: f64,
+    /// The first-pass score a box needs for the turned passes to look around it.
+    pub test_time_focus_score: f64,
 }
 
 impl Default for PostProcessConfig {
@@ -95,6 +103,8 @@ impl Default for PostProcessConfig {
             facing_stage: true,
             test_time_turns: 1,
             test_time_radius: 0.6,
+            test_time_focus: 0.0,
+            test_time_focus_score: 0.05,
         }
     }
 }
@@ -105,6 +115,12 @@ impl PostProcessConfig {
         crate::test_time::GridTurn::passes(self.test_time_turns)?;
         if !(self.test_time_radius > 0.0 && self.test_time_radius.is_finite()) {
             return Err(format!("model.post.test_time_radius must be a positive number of metres, got {}", self.test_time_radius));
+        }
+        if !(self.test_time_focus >= 0.0 && self.test_time_focus.is_finite()) {
+            return Err(format!("model.post.test_time_focus must be 0 (the whole cloud) or a positive number of metres, got {}", self.test_time_focus));
+        }
+        if !(0.0..=1.0).contains(&self.test_time_focus_score) {
+            return Err(format!("model.post.test_time_focus_score must lie in [0, 1], got {}", self.test_time_focus_score));
         }
         Ok(())
     }

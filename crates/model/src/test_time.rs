@@ -6,7 +6,7 @@
 //! variance. Half and quarter turns map the voxel grid onto itself, so every pass sees the same
 //! points in the same cells, turned.
 
-use data_jrdb::Box3d;
+use data_jrdb::{Batch, Box3d};
 use std::collections::HashMap;
 
 use eval::nms::BoxMean;
@@ -47,6 +47,16 @@ impl GridTurn {
         }
     }
 
+    /// A voxel `(b, x, y, z)` of the lattice turned, as its points turn.
+    pub fn voxel(self, [b, i, j, k]: [i32; 4]) -> [i32; 4] {
+        match self.quarters {
+            0 => [b, i, j, k],
+            1 => [b, -j, i, k],
+            2 => [b, -i, -j, k],
+            _ => [b, j, -i, k],
+        }
+    }
+
     /// A box found in the turned cloud, turned back into the cloud's own frame (heading in (−π, π]).
     pub fn undo(self, b: &Box3d) -> Box3d {
         let (cx, cy) = match self.quarters {
@@ -58,6 +68,61 @@ impl GridTurn {
         let rot_z = wrap_angle(b.rot_z - f64::from(self.quarters) * std::f64::consts::FRAC_PI_2);
         Box3d { cx, cy, rot_z, ..*b }
     }
+}
+
+/// The indices of the points within `radius` in bird's-eye view of the centre of some box of
+/// `around`, ascending: what a turned pass focused on the first pass's proposals looks at.
+pub fn focus(points: &[[f32; 3]], around: &[Box3d], radius: f64) -> Vec<usize> {
+    let Some(first) = around.first() else { return Vec::new() };
+    // A grid over the boxes' extent with cells no smaller than the radius (so a point's 3 × 3
+    // cells hold every box within reach) and at most 256 a side.
+    let (lo, hi) = around.iter().fold(((first.cx, first.cy), (first.cx, first.cy)), |(lo, hi), b| {
+        ((lo.0.min(b.cx), lo.1.min(b.cy)), (hi.0.max(b.cx), hi.1.max(b.cy)))
+    });
+    let cell = radius.max((hi.0 - lo.0).max(hi.1 - lo.1) / 256.0).max(f64::MIN_POSITIVE);
+    let (nx, ny) = (((hi.0 - lo.0) / cell) as usize + 1, ((hi.1 - lo.1) / cell) as usize + 1);
+    let mut grid: Vec<Vec<(f64, f64)>> = vec![Vec::new(); nx * ny];
+    for b in around {
+        grid[((b.cx - lo.0) / cell) as usize * ny + ((b.cy - lo.1) / cell) as usize].push((b.cx, b.cy));
+    }
+    let r2 = radius * radius;
+    let near = |x: f64, y: f64| {
+        let (i, j) = (((x - lo.0) / cell).floor(), ((y - lo.1) / cell).floor());
+        if i < -1.0 || j < -1.0 || i > nx as f64 || j > ny as f64 {
+            return false;
+        }
+        let (i, j) = (i as i64, j as i64);
+        (i - 1..=i + 1)
+            .filter(|&a| (0..nx as i64).contains(&a))
+            .flat_map(|a| (j - 1..=j + 1).filter(|&b| (0..ny as i64).contains(&b)).map(move |b| a as usize * ny + b as usize))
+            .flat_map(|k| &grid[k])
+            .any(|&(cx, cy)| (x - cx).powi(2) + (y - cy).powi(2) <= r2)
+    };
+    (0..points.len()).filter(|&i| near(f64::from(points[i][0]), f64::from(points[i][1]))).collect()
+}
+
+/// The voxels `rows[s]` of each sample `s` of `batch`, turned: what voxelizing the turned cloud
+/// gives (`round(x / size)` is odd in x, so a voxel's turned points fall in its turned cell),
+/// without voxelizing it again. Samples without rows are left out; the second value lists the
+/// samples kept, in order. The batch holds no boxes or clouds: it is for the network alone.
+pub fn turned_batch(batch: &Batch, rows: &[Vec<usize>], turn: GridTurn) -> (Batch, Vec<usize>) {
+    let kept: Vec<usize> = (0..batch.len()).filter(|&s| !rows[s].is_empty()).collect();
+    let mut out = Batch { offsets: vec![0], voxel_size: batch.voxel_size, ..Default::default() };
+    for (b, &s) in kept.iter().enumerate() {
+        for &r in &rows[s] {
+            let [_, i, j, k] = batch.coords[r];
+            out.coords.push(turn.voxel([b as i32, i, j, k]));
+            out.features.extend(turn.point(batch.point(r)));
+            out.centres.extend(turn.point(batch.centre(r)));
+        }
+        out.offsets.push(out.coords.len());
+        out.frames.push(batch.frames[s].clone());
+        out.boxes.push(Vec::new());
+        out.num_points.push(Vec::new());
+        out.ignored.push(Vec::new());
+        out.clouds.push(Vec::new());
+    }
+    (out, kept)
 }
 
 /// Fuses the detections of several passes over one cloud (weighted box fusion, one box per pass
@@ -142,6 +207,44 @@ mod tests {
         }
         assert!(GridTurn::passes(3).is_err() && GridTurn::passes(0).is_err());
         assert_eq!(GridTurn::passes(2).unwrap().iter().map(|t| t.quarters).collect::<Vec<_>>(), vec![0, 2]);
+    }
+
+    #[test]
+    fn focus_keeps_exactly_the_points_within_the_radius_of_a_box() {
+        // A line of points every 0.25 m along x at y = 0.5, and boxes at x = 0 and x = 10.
+        let cloud: Vec<[f32; 3]> = (-20..=60).map(|i| [i as f32 * 0.25, 0.5, 0.1]).collect();
+        let boxes = [at(0.0, 0.0, 0.0), at(10.0, 0.0, 0.0)];
+        // Within 1.3 m of (0, 0) or (10, 0) at y = 0.5: |x| ≤ 1.2 or |x − 10| ≤ 1.2.
+        let want: Vec<usize> = (0..cloud.len()).filter(|&i| cloud[i][0].abs() <= 1.2 || (cloud[i][0] - 10.0).abs() <= 1.2).collect();
+        assert_eq!(want.len(), 18);
+        assert_eq!(focus(&cloud, &boxes, 1.3), want);
+        assert!(focus(&cloud, &[], 1.3).is_empty());
+        assert_eq!(focus(&cloud, &boxes, 100.0), (0..cloud.len()).collect::<Vec<_>>());
+        // A radius far below the boxes' spread (the grid's cells grow, never its size).
+        assert_eq!(focus(&cloud, &boxes, 1e-9), Vec::<usize>::new());
+        assert_eq!(focus(&[[0.0, 0.0, 0.0], [10.0, 1e-10, 0.0]], &boxes, 1e-9), vec![0, 1]);
+    }
+
+    #[test]
+    fn a_turned_batch_is_the_turned_cloud_voxelized() {
+        use data_jrdb::{Frame, SampleConfig, VoxelConfig, collate, prepare};
+        use rand::SeedableRng;
+        // Points on both sides of every axis, some on cell boundaries (x = 0.1 = half a voxel).
+        let cloud: Vec<[f32; 3]> = (0..200).map(|i| { let t = i as f32 * 0.37; [(t.sin() * 7.0 * 10.0).round() / 10.0 + 0.1 * (i % 3) as f32, t.cos() * 5.3 - 0.1, (t * 0.3).sin()] }).collect();
+        let batch_of = |points: Vec<[f32; 3]>| {
+            let frame = Frame { sequence: "s".into(), name: "f".into(), n_upper: points.len(), points, dropped_non_finite: 0, boxes: Vec::new(), num_points: Vec::new(), label_ids: Vec::new(), ignored: Vec::new() };
+            let cfg = SampleConfig { voxel: VoxelConfig { voxel_size: [0.2; 3], ..Default::default() }, ..SampleConfig::eval() };
+            collate(vec![prepare(frame, &cfg, &mut rand_chacha::ChaCha8Rng::seed_from_u64(0))], [0.2; 3])
+        };
+        let whole = batch_of(cloud.clone());
+        for turn in GridTurn::passes(4).unwrap() {
+            let again = batch_of(cloud.iter().map(|&p| turn.point(p)).collect());
+            let (turned, kept) = turned_batch(&whole, &[(0..whole.num_voxels()).collect()], turn);
+            assert_eq!(kept, vec![0]);
+            assert_eq!((&turned.coords, &turned.features, &turned.centres, &turned.offsets), (&again.coords, &again.features, &again.centres, &again.offsets), "{turn:?}");
+        }
+        let (none, kept) = turned_batch(&whole, &[Vec::new()], GridTurn::passes(2).unwrap()[1]);
+        assert!(kept.is_empty() && none.is_empty() && none.num_voxels() == 0);
     }
 
     #[test]

@@ -18,8 +18,8 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use burn::module::Module;
 use burn::tensor::Device;
-use data_jrdb::{Batch, Frame, collate, prepare};
-use model::{CenterPoint, Detections, Detector, FacingClassifier, GridTurn, ModelConfig, PersonMinkUNet, fuse};
+use data_jrdb::{Batch, Box3d, Frame, collate, prepare};
+use model::{CenterPoint, Detections, Detector, FacingClassifier, GridTurn, ModelConfig, PersonMinkUNet, focus, fuse, turned_batch};
 use rand::SeedableRng;
 
 use crate::backend::{BackendKind, init_threads};
@@ -134,7 +134,7 @@ impl RunDetector {
     /// [`DataConfig::eval_sample`]: data_jrdb::DataConfig::eval_sample
     pub fn detect_batch(&self, batch: &Batch) -> Vec<Detections> {
         let mut found = self.forward(batch);
-        if self.turns.len() > 1 && batch.clouds.len() == batch.len() {
+        if self.turns.len() > 1 {
             found = self.fused_over_turns(batch, found);
         }
         if let Some(stage) = &self.facing {
@@ -153,19 +153,29 @@ impl RunDetector {
         }
     }
 
-    /// `first` (the detections in `batch` as it is) fused with those in its clouds at the other
-    /// test-time turns, turned back.
+    /// `first` (the detections in `batch` as it is) fused with those in its voxels at the other
+    /// test-time turns, turned back. With `test_time_focus`, the turned passes see only the voxels
+    /// around `first`'s proposals (a frame without any runs none).
     fn fused_over_turns(&self, batch: &Batch, first: Vec<Detections>) -> Vec<Detections> {
         let post = self.config.model.post();
+        let rows: Vec<Vec<usize>> = (0..batch.len())
+            .map(|s| {
+                let rows = batch.rows(s);
+                if post.test_time_focus <= 0.0 {
+                    return rows.collect();
+                }
+                let d = &first[s];
+                let around: Vec<Box3d> = d.boxes.iter().zip(&d.scores).filter(|(_, s)| f64::from(**s) >= post.test_time_focus_score).map(|(b, _)| *b).collect();
+                focus(&batch.points(s), &around, post.test_time_focus).into_iter().map(|i| rows.start + i).collect()
+            })
+            .collect();
         let mut passes: Vec<Vec<Detections>> = first.into_iter().map(|d| vec![d]).collect();
         for &turn in self.turns.iter().filter(|t| !t.is_identity()) {
-            let clouds = batch
-                .frames
-                .iter()
-                .zip(&batch.clouds)
-                .map(|((sequence, name), cloud)| (sequence.clone(), name.clone(), cloud.iter().map(|&p| turn.point(p)).collect()))
-                .collect();
-            for (seen, d) in passes.iter_mut().zip(self.forward(&self.batch_of(clouds))) {
+            let (turned, kept) = turned_batch(batch, &rows, turn);
+            let found = if kept.is_empty() { Vec::new() } else { self.forward(&turned) };
+            let mut found = kept.into_iter().zip(found).peekable();
+            for (s, seen) in passes.iter_mut().enumerate() {
+                let d = found.next_if(|(k, _)| *k == s).map(|(_, d)| d).unwrap_or_default();
                 seen.push(Detections { boxes: d.boxes.iter().map(|b| turn.undo(b)).collect(), scores: d.scores });
             }
         }

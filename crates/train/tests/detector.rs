@@ -77,3 +77,37 @@ fn with_four_turns_the_boxes_turn_with_the_cloud() {
     let (c, d) = (one.detect(&points), one.detect(&quarter));
     assert!(c.scores.iter().zip(&d.scores).any(|(s, t)| (s - t).abs() > 1e-3) || c.boxes.len() != d.boxes.len());
 }
+
+/// Focused turns: turned passes that look at every point give exactly the whole-cloud fusion,
+/// and turned passes that look at nothing leave each first-pass box a quarter of its score.
+#[test]
+fn focused_turns_look_only_around_the_first_pass_boxes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let root = tmp.path().join("sim");
+    synth(&root, &SynthConfig { sequences: 1, frames: 1, seed: 13, max_people: 12, ..Default::default() }).unwrap();
+    let with = |turns: usize, focus: f64, focus_score: f64| {
+        let mut cfg = train::RunDir::at(&weights()).config().unwrap();
+        let post = cfg.model.post_mut();
+        (post.test_time_turns, post.test_time_focus, post.test_time_focus_score) = (turns, focus, focus_score);
+        post.facing_stage = false;
+        RunDetector::with_config(&weights(), cfg, Slot::Latest, None).unwrap()
+    };
+    let points = Dataset::open(&root, &with(1, 0.0, 0.05).config().data.dataset(Split::TrainVal)).unwrap().load(0).unwrap().points;
+    let whole = with(4, 0.0, 0.05).detect(&points);
+    assert!(whole.scores.iter().any(|&s| s >= 0.5), "the weights find people in the frame");
+    // A radius wider than the volume around every first-pass box: every point, the same passes.
+    assert_eq!(with(4, 1000.0, 0.0).detect(&points), whole);
+    // No first-pass box scores above 1: the turned passes see nothing.
+    let one = with(1, 0.0, 0.05).detect(&points);
+    assert!(one.scores.iter().all(|&s| s < 1.0));
+    let blind = with(4, 2.0, 1.0).detect(&points);
+    assert_eq!(blind.boxes.len(), one.boxes.len());
+    for ((b, s), (c, t)) in blind.boxes.iter().zip(&blind.scores).zip(one.boxes.iter().zip(&one.scores)) {
+        assert!((s - t / 4.0).abs() < 1e-6 && (b.cx - c.cx).abs() < 1e-9 && (b.cy - c.cy).abs() < 1e-9, "{b:?} {s} vs {c:?} {t}");
+    }
+    // Focused on 2 m around the boxes scoring ≥ 0.05: the strong people of the whole fusion stay.
+    let focused = with(4, 2.0, 0.05).detect(&points);
+    for (p, _) in whole.boxes.iter().zip(&whole.scores).filter(|(_, s)| **s >= 0.5) {
+        assert!(focused.boxes.iter().zip(&focused.scores).any(|(q, &t)| t >= 0.3 && (p.cx - q.cx).hypot(p.cy - q.cy) < 0.3), "{p:?} lost");
+    }
+}
