@@ -53,6 +53,17 @@ impl RunDetector {
         Self::with_config(run, config, slot, backend)
     }
 
+    /// As [`load`](Self::load) with keys of the run's config overridden for this detector
+    /// (`model.post.test_time_turns=4`, as `--set` of `detect` and `serve`); the run's
+    /// `config.toml` is unchanged.
+    pub fn load_with(run: &Path, overrides: &[String], slot: Slot, backend: Option<BackendKind>) -> Result<Self> {
+        if overrides.is_empty() {
+            return Self::load(run, slot, backend);
+        }
+        let config = RunConfig::load(&RunDir::at(run).config_file(), overrides).with_context(|| format!("{} with --set {}", run.display(), overrides.join(" --set ")))?;
+        Self::with_config(run, config, slot, backend)
+    }
+
     /// As [`load`](Self::load) with `config` instead of the run's own (e.g. other
     /// post-processing); the model's shape must be the one the checkpoint holds.
     pub fn with_config(run: &Path, mut config: RunConfig, slot: Slot, backend: Option<BackendKind>) -> Result<Self> {

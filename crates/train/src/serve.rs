@@ -55,6 +55,8 @@ use crate::validate::FrameResult;
 pub struct ServeOptions {
     /// The run folder whose model is served.
     pub run: PathBuf,
+    /// Keys of its config overridden for this service (`--set`).
+    pub overrides: Vec<String>,
     /// Its checkpoint.
     pub checkpoint: Slot,
     /// Backend override.
@@ -217,11 +219,11 @@ async fn admit(State(state): State<AppState>, mut req: Request, next: Next) -> R
 /// answers with the health document once it is ready.
 fn start_model_thread(opts: &ServeOptions, mut rx: mpsc::Receiver<Job>) -> Result<serde_json::Value> {
     let (ready_tx, ready_rx) = std::sync::mpsc::channel();
-    let (run, slot, backend) = (opts.run.clone(), opts.checkpoint, opts.backend);
+    let (run, overrides, slot, backend) = (opts.run.clone(), opts.overrides.clone(), opts.checkpoint, opts.backend);
     std::thread::Builder::new()
         .name("model".into())
         .spawn(move || {
-            let detector = match RunDetector::load(&run, slot, backend) {
+            let detector = match RunDetector::load_with(&run, &overrides, slot, backend) {
                 Ok(d) => d,
                 Err(e) => {
                     let _ = ready_tx.send(Err(e));

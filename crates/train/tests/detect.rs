@@ -509,3 +509,42 @@ fn auto_finds_a_raised_tilted_sensor_and_reports_it() {
     let near = g.detections.iter().filter(|d| a.detections.iter().any(|e| (d.x - e.x).hypot(d.y - e.y) < 0.1)).count();
     assert!(near * 10 >= g.detections.len() * 9, "{near} of {} boxes found again", g.detections.len());
 }
+
+/// `--set` overrides the run's config for one invocation: focused test-time turns give the
+/// library's boxes with the same settings, the run's config.toml is untouched, and a value the
+/// config refuses is an error naming it, nothing written.
+#[test]
+fn set_overrides_the_runs_post_processing_for_one_invocation() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (_, frames) = tree(tmp.path());
+    let points = &frames[0].points;
+    std::fs::write(tmp.path().join("frame.npy"), npy(points, 3, false)).unwrap();
+    let (w, before) = (weights(), std::fs::read(weights().join("config.toml")).unwrap());
+    let out = tmp.path().join("out");
+    let sets = ["model.post.test_time_turns=2", "model.post.test_time_focus=5.0"];
+    let frame = tmp.path().join("frame.npy");
+    let mut args: Vec<String> = ["detect", frame.to_str().unwrap(), "--run", w.to_str().unwrap(), "--score-threshold", "0", "--transform", "identity", "--out", out.to_str().unwrap()].map(String::from).to_vec();
+    for s in sets {
+        args.extend(["--set".to_string(), s.to_string()]);
+    }
+    ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    let got = report(&out.join("json").join("frame.json"));
+    let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
+    let detector = train::RunDetector::load_with(&w, &sets, train::Slot::Latest, None).unwrap();
+    assert_eq!(detector.config().model.post().test_time_focus, 5.0);
+    let want = detector.detect(points);
+    assert_eq!(got.detections.len(), want.boxes.len());
+    for (g, (b, s)) in got.detections.iter().zip(want.boxes.iter().zip(&want.scores)) {
+        assert!((g.x - b.cx).abs() < 1e-9 && (g.y - b.cy).abs() < 1e-9 && (g.score - f64::from(*s)).abs() < 1e-6, "{g:?} vs {b:?} {s}");
+    }
+    // One pass's scores are not these (the second pass counted).
+    let one = train::RunDetector::load(&w, train::Slot::Latest, None).unwrap().detect(points);
+    assert!(one.scores.iter().zip(&want.scores).any(|(a, b)| (a - b).abs() > 1e-3));
+    assert_eq!(std::fs::read(w.join("config.toml")).unwrap(), before, "the run's config is unchanged");
+
+    let bad_out = tmp.path().join("bad");
+    let bad = common::train_bin(&["detect", tmp.path().join("frame.npy").to_str().unwrap(), "--run", w.to_str().unwrap(), "--set", "model.post.test_time_turns=3", "--out", bad_out.to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&bad.stderr);
+    assert!(!bad.status.success() && stderr.contains("test_time_turns") && stderr.contains("config.toml"), "{stderr}");
+    assert!(!bad_out.exists(), "nothing written");
+}
