@@ -5,6 +5,7 @@
 //! the origin) without being told the sensor's height and tilt.
 
 use rand::{Rng, SeedableRng};
+use rayon::prelude::*;
 
 use crate::sim::geometry::{cross, dot, sub};
 
@@ -107,38 +108,45 @@ pub fn fit_ground(points: &[[f32; 3]], s: &GroundSearch) -> Result<GroundPlane, 
     let min_nz = (s.max_tilt_deg as f64).to_radians().cos();
     let tol = s.tolerance as f64;
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0x6772_6f75_6e64);
-    let mut best: Option<([f64; 3], f64, i64)> = None;
     // Hypotheses are scored on at most ~8,000 of the candidates (every `stride`-th), refined on all.
     let stride = n.div_ceil(8000).max(1);
-    for _ in 0..s.iterations {
-        let [a, b, c] = [0, 1, 2].map(|_| candidates[rng.random_range(0..n)]);
-        let (u, v) = (sub(b, a), sub(c, a));
-        let mut normal = cross(u, v);
-        let len = dot(normal, normal).sqrt();
-        if len < 1e-9 {
-            continue;
-        }
-        normal = normal.map(|x| x / len);
-        if normal[2] < 0.0 {
-            normal = normal.map(|x| -x);
-        }
-        if normal[2] < min_nz {
-            continue;
-        }
-        let d = -dot(normal, a);
-        // The ground is the lowest surface: returns below a plane count against it. A level band
-        // through walls and vehicles can hold more returns than a road split by kerbs, but has
-        // the road below it; of a road and a sidewalk beside it, the road wins.
-        let (mut on, mut below) = (0usize, 0usize);
-        for p in candidates.iter().step_by(stride) {
-            let e = dot(normal, *p) + d;
-            if e.abs() <= tol {
-                on += 1;
-            } else if e < -tol {
-                below += 1;
+    // Drawn in order from the seed, scored in parallel, the first best kept: the same plane
+    // whatever the number of threads.
+    let hypotheses: Vec<([f64; 3], f64)> = (0..s.iterations)
+        .filter_map(|_| {
+            let [a, b, c] = [0, 1, 2].map(|_| candidates[rng.random_range(0..n)]);
+            let mut normal = cross(sub(b, a), sub(c, a));
+            let len = dot(normal, normal).sqrt();
+            if len < 1e-9 {
+                return None;
             }
-        }
-        let score = on as i64 - below as i64;
+            normal = normal.map(|x| x / len);
+            if normal[2] < 0.0 {
+                normal = normal.map(|x| -x);
+            }
+            (normal[2] >= min_nz).then(|| (normal, -dot(normal, a)))
+        })
+        .collect();
+    let scores: Vec<i64> = hypotheses
+        .par_iter()
+        .map(|&(normal, d)| {
+            // The ground is the lowest surface: returns below a plane count against it. A level
+            // band through walls and vehicles can hold more returns than a road split by kerbs,
+            // but has the road below it; of a road and a sidewalk beside it, the road wins.
+            let (mut on, mut below) = (0i64, 0i64);
+            for p in candidates.iter().step_by(stride) {
+                let e = dot(normal, *p) + d;
+                if e.abs() <= tol {
+                    on += 1;
+                } else if e < -tol {
+                    below += 1;
+                }
+            }
+            on - below
+        })
+        .collect();
+    let mut best: Option<([f64; 3], f64, i64)> = None;
+    for (&(normal, d), &score) in hypotheses.iter().zip(&scores) {
         if best.is_none_or(|b| score > b.2) {
             best = Some((normal, d, score));
         }
@@ -241,5 +249,14 @@ mod tests {
         assert!(matches!(fit_ground(&sky, &GroundSearch::default()), Err(NoGround::TooFewCandidates(_))));
         let wall: Vec<[f32; 3]> = (0..5000).map(|_| [5.0, rng.random_range(-20.0..20.0), rng.random_range(-3.0..-0.5)]).collect();
         assert!(matches!(fit_ground(&wall, &GroundSearch::default()), Err(NoGround::NoPlane { .. })));
+    }
+
+    #[test]
+    fn the_plane_does_not_depend_on_the_number_of_threads() {
+        let points = scan(1.2, 0.02, -0.03);
+        let on = |threads: usize| rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap().install(|| fit_ground(&points, &GroundSearch::default()));
+        let one = on(1).unwrap();
+        assert_eq!(on(3).unwrap(), one);
+        assert_eq!(on(8).unwrap(), one);
     }
 }
