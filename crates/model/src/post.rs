@@ -75,9 +75,9 @@ pub struct PostProcessConfig {
     /// Boxes of different passes whose bird's-eye centres lie within this radius (metres) of
     /// the best one are one person.
     pub test_time_radius: f64,
-    /// With turns, each turned pass runs only on the points within this bird's-eye radius
-    /// (metres) of a first-pass box scoring at least `test_time_focus_score`; 0: on the whole
-    /// cloud. A fused score only matters where some pass draws a box, and the first pass (the
+    /// With turns, each turned pass runs only on the voxels whose point lies within this
+    /// bird's-eye radius (metres) of a first-pass box scoring at least `test_time_focus_score`;
+    /// 0: on the whole cloud. A fused score only matters where some pass draws a box, and the first pass (the
     /// cloud as it is, whole) proposes them; the turned passes re-score its proposals at a
     /// fraction of a pass's cost.
     pub test_time_focus: f64,
