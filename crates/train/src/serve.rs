@@ -237,6 +237,7 @@ fn start_model_thread(opts: &ServeOptions, mut rx: mpsc::Receiver<Job>) -> Resul
                 "backend": cfg.backend.name(),
                 "run": run.display().to_string(),
                 "checkpoint": detector.checkpoint().file_name().map(|n| n.to_string_lossy().into_owned()),
+                "overrides": overrides,
             });
             let range = cfg.eval.max_range.unwrap_or(25.0);
             let _ = ready_tx.send(Ok(health));

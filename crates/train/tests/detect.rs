@@ -511,8 +511,9 @@ fn auto_finds_a_raised_tilted_sensor_and_reports_it() {
 }
 
 /// `--set` overrides the run's config for one invocation: focused test-time turns give the
-/// library's boxes with the same settings, the run's config.toml is untouched, and a value the
-/// config refuses is an error naming it, nothing written.
+/// library's boxes with the same settings (and the service's, which reports them on /health),
+/// the run's config.toml is untouched, and a value the config refuses is an error naming it,
+/// nothing written.
 #[test]
 fn set_overrides_the_runs_post_processing_for_one_invocation() {
     let tmp = tempfile::tempdir().unwrap();
@@ -541,6 +542,16 @@ fn set_overrides_the_runs_post_processing_for_one_invocation() {
     let one = train::RunDetector::load(&w, train::Slot::Latest, None).unwrap().detect(points);
     assert!(one.scores.iter().zip(&want.scores).any(|(a, b)| (a - b).abs() > 1e-3));
     assert_eq!(std::fs::read(w.join("config.toml")).unwrap(), before, "the run's config is unchanged");
+
+    // The service with the same keys answers the same boxes and says what it overrides.
+    let server = start_server(&["--set", sets[0].as_str(), "--set", sets[1].as_str(), "--score-threshold", "0", "--transform", "identity"]);
+    let h: serde_json::Value = serde_json::from_slice(&request(&server.addr, "GET", "/health", &[], b"").body).unwrap();
+    assert_eq!(h["overrides"], serde_json::json!(sets));
+    let r = request(&server.addr, "POST", "/detect", &[], &std::fs::read(&frame).unwrap());
+    assert_eq!(r.status, 200, "{}", String::from_utf8_lossy(&r.body));
+    let served: FrameReport = serde_json::from_slice(&r.body).unwrap();
+    assert_same_boxes(&served.detections, &got.detections, "served with --set");
+    drop(server);
 
     let bad_out = tmp.path().join("bad");
     let bad = common::train_bin(&["detect", tmp.path().join("frame.npy").to_str().unwrap(), "--run", w.to_str().unwrap(), "--set", "model.post.test_time_turns=3", "--out", bad_out.to_str().unwrap()]);
