@@ -60,7 +60,7 @@ impl RunDetector {
         if overrides.is_empty() {
             return Self::load(run, slot, backend);
         }
-        let config = RunConfig::load(&RunDir::at(run).config_file(), overrides).with_context(|| format!("{} with --set {}", run.display(), overrides.join(" --set ")))?;
+        let config = RunDir::at(run).config_with(overrides).with_context(|| format!("{} with --set {}", run.display(), overrides.join(" --set ")))?;
         Self::with_config(run, config, slot, backend)
     }
 

@@ -113,7 +113,7 @@ pub fn detect_run_split(
 
 /// Loads the run's model from a checkpoint and writes, scores and draws its detections.
 pub fn infer(run: &RunDir, opts: &InferOptions) -> Result<InferOutput> {
-    let mut cfg = if opts.set.is_empty() { run.config()? } else { RunConfig::load(&run.config_file(), &opts.set)? };
+    let mut cfg = run.config_with(&opts.set)?;
     if let Some(format) = opts.data_format {
         cfg.data.format = format;
     }

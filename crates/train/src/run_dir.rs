@@ -96,6 +96,15 @@ impl RunDir {
         RunConfig::from_toml_str(&text).with_context(|| format!("in {}", self.config_file().display()))
     }
 
+    /// The stored config with `overrides` (`key.path=value`, as `--set`) applied for one use;
+    /// the file is unchanged.
+    pub fn config_with(&self, overrides: &[String]) -> Result<RunConfig> {
+        if overrides.is_empty() {
+            return self.config();
+        }
+        RunConfig::load(&self.config_file(), overrides)
+    }
+
     /// `config.toml`.
     pub fn config_file(&self) -> PathBuf {
         self.root.join("config.toml")
